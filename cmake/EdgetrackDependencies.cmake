@@ -1,0 +1,32 @@
+# Third-party dependencies, all from Debian packages (see toolchain/install-deps.sh).
+find_package(Eigen3 3.4 REQUIRED NO_MODULE)
+find_package(CLI11 REQUIRED)
+find_package(ZLIB REQUIRED)
+find_package(Threads REQUIRED)
+
+# toml++ is used header-only, so the host's headers serve every target architecture.
+find_path(TOMLPLUSPLUS_INCLUDE_DIR toml++/toml.h REQUIRED)
+add_library(tomlplusplus_header_only INTERFACE)
+target_include_directories(tomlplusplus_header_only SYSTEM INTERFACE ${TOMLPLUSPLUS_INCLUDE_DIR})
+target_compile_definitions(tomlplusplus_header_only INTERFACE TOML_HEADER_ONLY=1 TOML_EXCEPTIONS=0)
+
+# NEON intrinsics: native on aarch64, translated by SIMDe everywhere else.
+if(NOT CMAKE_SYSTEM_PROCESSOR MATCHES "^(aarch64|arm64|ARM64)$")
+    find_path(SIMDE_INCLUDE_DIR simde/arm/neon.h REQUIRED)
+    add_library(simde_neon INTERFACE)
+    target_include_directories(simde_neon SYSTEM INTERFACE ${SIMDE_INCLUDE_DIR})
+    target_compile_definitions(simde_neon INTERFACE EDGETRACK_NEON_VIA_SIMDE=1)
+    set(EDGETRACK_NEON_BACKEND "SIMDe")
+else()
+    add_library(simde_neon INTERFACE)
+    set(EDGETRACK_NEON_BACKEND "native")
+endif()
+message(STATUS "edgetrack: NEON intrinsics ${EDGETRACK_NEON_BACKEND}")
+
+if(EDGETRACK_BUILD_TESTS)
+    find_package(GTest REQUIRED)
+    include(GoogleTest)
+endif()
+if(EDGETRACK_BUILD_BENCHMARKS)
+    find_package(benchmark REQUIRED)
+endif()

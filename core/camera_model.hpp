@@ -1,0 +1,87 @@
+// Pinhole camera with OpenCV's five distortion coefficients: projection, undistortion, rays.
+#pragma once
+
+#include <array>
+#include <optional>
+
+#include "core/geometry.hpp"
+
+namespace edgetrack {
+
+/// \brief Intrinsics of one camera, in pixels, as in rig.toml (INTERFACES §2).
+struct CameraIntrinsics {
+    int width_px = 0;
+    int height_px = 0;
+    double fx_px = 0.0;
+    double fy_px = 0.0;
+    double cx_px = 0.0;
+    double cy_px = 0.0;
+    /// OpenCV order: k1, k2, p1, p2, k3.
+    std::array<double, 5> distortion{};
+};
+
+/// \brief Where a camera sits in the rig: p_cam = rotation * p_rig + translation (millimetres).
+struct CameraExtrinsics {
+    Mat3 rotation_cam_from_rig = Mat3::Identity();
+    Vec3 translation_cam_from_rig_mm = Vec3::Zero();
+};
+
+/// \brief A half-line in the rig frame: origin (mm) plus a unit direction.
+struct Ray {
+    Vec3 origin_rig_mm = Vec3::Zero();
+    Vec3 direction_rig = Vec3::UnitZ();
+};
+
+/**
+ * \brief A calibrated camera: pinhole plus radial (k1, k2, k3) and tangential (p1, p2) distortion.
+ *
+ * "Normalized" coordinates are x/z, y/z in the camera frame (no unit); "pixel" coordinates are raw,
+ * distorted sensor pixels with (0, 0) at the centre of the top-left pixel, as OpenCV.
+ */
+class CameraModel {
+public:
+    CameraModel() = default;
+    CameraModel(const CameraIntrinsics& intrinsics, const CameraExtrinsics& extrinsics);
+
+    /// \return true when the focal lengths and size are positive and the rotation is proper.
+    bool isValid() const { return valid_; }
+
+    const CameraIntrinsics& intrinsics() const { return intrinsics_; }
+    const CameraExtrinsics& extrinsics() const { return extrinsics_; }
+
+    /// \return the camera's optical centre in the rig frame (mm).
+    Vec3 centre_rig_mm() const { return centre_rig_mm_; }
+
+    /// \return \a point_rig_mm in the camera frame (mm).
+    Vec3 toCamera(const Vec3& point_rig_mm) const;
+
+    /**
+     * \brief Project a point of the rig frame (mm) to raw pixel coordinates.
+     * \return the pixel, or nothing when the point is not in front of the camera.
+     */
+    std::optional<Vec2> project(const Vec3& point_rig_mm) const;
+
+    /// \brief Apply the lens distortion to undistorted normalized coordinates.
+    Vec2 distortNormalized(const Vec2& undistorted) const;
+
+    /// \brief Map normalized (distorted or not) coordinates to pixels.
+    Vec2 pixelFromNormalized(const Vec2& normalized) const;
+
+    /**
+     * \brief Undistort a raw pixel by Newton iteration on the distortion model.
+     * \return undistorted normalized coordinates, or nothing when the iteration does not converge
+     * (a pixel outside the lens model's invertible region).
+     */
+    std::optional<Vec2> undistortPixel(const Vec2& pixel) const;
+
+    /// \brief The ray through a raw pixel, in the rig frame; nothing when undistortion fails.
+    std::optional<Ray> ray(const Vec2& pixel) const;
+
+private:
+    CameraIntrinsics intrinsics_{};
+    CameraExtrinsics extrinsics_{};
+    Vec3 centre_rig_mm_ = Vec3::Zero();
+    bool valid_ = false;
+};
+
+} // namespace edgetrack

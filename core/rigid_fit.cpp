@@ -1,0 +1,54 @@
+// Least-squares rigid fit of two point sets (Kabsch / Umeyama without scale).
+#include "core/rigid_fit.hpp"
+
+#include <cmath>
+
+#include <Eigen/SVD>
+
+namespace edgetrack {
+
+std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec3> to) {
+    const std::size_t n = from.size();
+    if (n != to.size() || n < 3)
+        return std::nullopt;
+
+    Vec3 centroidFrom = Vec3::Zero();
+    Vec3 centroidTo = Vec3::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+        centroidFrom += from[i];
+        centroidTo += to[i];
+    }
+    const double inverseCount = 1.0 / static_cast<double>(n);
+    centroidFrom *= inverseCount;
+    centroidTo *= inverseCount;
+
+    Mat3 covariance = Mat3::Zero();
+    double spread = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3 a = from[i] - centroidFrom;
+        covariance += (to[i] - centroidTo) * a.transpose();
+        spread += a.squaredNorm();
+    }
+
+    const Eigen::JacobiSVD<Mat3> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Vec3 singular = svd.singularValues();
+    // Collinear (or coincident) points leave two singular values at zero; a relative test keeps
+    // this independent of the object's size.
+    if (!(singular(1) > 1e-9 * (singular(0) + spread)))
+        return std::nullopt;
+
+    Mat3 reflectionFix = Mat3::Identity();
+    if ((svd.matrixU() * svd.matrixV().transpose()).determinant() < 0.0)
+        reflectionFix(2, 2) = -1.0;
+    const Mat3 rotation = svd.matrixU() * reflectionFix * svd.matrixV().transpose();
+
+    RigidFit fit;
+    fit.transform = RigidTransform::fromMatrix(rotation, centroidTo - rotation * centroidFrom);
+    double sumSquares = 0.0;
+    for (std::size_t i = 0; i < n; ++i)
+        sumSquares += (to[i] - fit.transform.apply(from[i])).squaredNorm();
+    fit.rms_mm = std::sqrt(sumSquares * inverseCount);
+    return fit;
+}
+
+} // namespace edgetrack

@@ -1,0 +1,158 @@
+// The edgetrack command line (INTERFACES §3): parses arguments and runs one sub-command.
+#include "firmware_app/cli.hpp"
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "firmware_app/recording/recording.hpp"
+
+namespace edgetrack::app {
+
+namespace {
+
+struct RunOptions {
+    std::string config;
+    std::string board = "sim";
+    std::string scene;
+    std::int64_t frames = 0;
+    std::string udp;
+    std::string can;
+    std::string models;
+};
+
+struct SimOptions {
+    std::string scene;
+    std::int64_t frames = 0;
+    std::string out;
+    std::uint64_t seed = 1;
+    std::string level = "images";
+    bool list = false;
+};
+
+struct RecordingOptions {
+    std::string input;
+    std::string out;
+    std::string models;
+    std::string from;
+};
+
+// Accepts exactly the level names of INTERFACES §1 that a sub-command can start from.
+CLI::Validator levelValidator(std::vector<std::string> allowed) {
+    std::string names;
+    for (const std::string& a : allowed)
+        names += (names.empty() ? "" : "|") + a;
+    return CLI::Validator(
+        [allowed, names](std::string& value) -> std::string {
+            for (const std::string& a : allowed)
+                if (value == a)
+                    return {};
+            return "level must be one of " + names;
+        },
+        names, "LEVEL");
+}
+
+int notBuilt(std::ostream& err, const char* command, int issue) {
+    err << "edgetrack " << command << ": not built yet (issue " << issue << ")\n";
+    return kExitNotBuilt;
+}
+
+} // namespace
+
+int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::ostream& err) {
+    CLI::App app{"edgetrack: stereo IR marker tracker with on-board object calibration"};
+    app.require_subcommand(1);
+    app.failure_message(CLI::FailureMessage::simple);
+
+    RunOptions run;
+    CLI::App* runCommand = app.add_subcommand("run", "Run the firmware: capture, track, output");
+    runCommand->add_option("--config", run.config, "Configuration file (TOML)");
+    runCommand->add_option("--board", run.board, "Hardware backend")
+        ->check(CLI::IsMember({"sim", "linux"}));
+    runCommand->add_option("--scene", run.scene, "Scene of the simulated board");
+    runCommand->add_option("--frames", run.frames, "Stop after N frames (0: run until stopped)")
+        ->check(CLI::NonNegativeNumber);
+    runCommand->add_option("--udp", run.udp, "DTrack UDP destination HOST:PORT");
+    runCommand->add_option("--can", run.can, "CAN interface for pose frames");
+    runCommand->add_option("--models", run.models, "Load models from this directory");
+
+    SimOptions sim;
+    CLI::App* simCommand = app.add_subcommand("sim", "Write a recording of a simulated scene");
+    CLI::Option* listFlag = simCommand->add_flag("--list", sim.list, "List the scenes and exit");
+    simCommand->add_option("--scene", sim.scene, "Scene name (see --list)")->excludes(listFlag);
+    simCommand->add_option("--frames", sim.frames, "Number of frames")
+        ->check(CLI::PositiveNumber)
+        ->excludes(listFlag);
+    simCommand->add_option("--out", sim.out, "Recording directory to write")->excludes(listFlag);
+    simCommand->add_option("--seed", sim.seed, "Random seed");
+    simCommand->add_option("--level", sim.level, "Lowest level to write")
+        ->check(levelValidator({"images", "blobs", "points"}));
+
+    RecordingOptions reconstruct;
+    CLI::App* reconstructCommand =
+        app.add_subcommand("reconstruct", "Blobs, stereo and triangulation of a recording");
+    reconstructCommand->add_option("--input", reconstruct.input, "Recording to read")->required();
+    reconstructCommand->add_option("--out", reconstruct.out, "Recording to write")->required();
+    reconstructCommand->add_option("--from", reconstruct.from, "Level to start from")
+        ->check(levelValidator({"images", "blobs"}));
+
+    RecordingOptions calibrate;
+    CLI::App* calibrateCommand =
+        app.add_subcommand("calibrate", "Learn the rigid marker objects of a recording");
+    calibrateCommand->add_option("--input", calibrate.input, "Recording or .c3d file")->required();
+    calibrateCommand->add_option("--out", calibrate.out, "Model directory to write")->required();
+    calibrateCommand->add_option("--from", calibrate.from, "Level to start from")
+        ->check(levelValidator({"images", "blobs", "points"}));
+
+    RecordingOptions track;
+    CLI::App* trackCommand = app.add_subcommand("track", "Find the models' poses in a recording");
+    trackCommand->add_option("--models", track.models, "Model directory")->required();
+    trackCommand->add_option("--input", track.input, "Recording or .c3d file")->required();
+    trackCommand->add_option("--out", track.out, "Pose CSV to write")->required();
+    trackCommand->add_option("--from", track.from, "Level to start from")
+        ->check(levelValidator({"images", "blobs", "points"}));
+
+    CLI::App* modelCommand = app.add_subcommand("model", "Inspect and convert stored models");
+    modelCommand->require_subcommand(1);
+    for (const char* name : {"list", "show", "export", "import"})
+        modelCommand->add_subcommand(name, std::string(name) + " models")->allow_extras();
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp&) {
+        // help() follows the parsed sub-commands, so "edgetrack sim --help" shows sim's options.
+        out << app.help();
+        return 0;
+    } catch (const CLI::CallForAllHelp&) {
+        out << app.help("", CLI::AppFormatMode::All);
+        return 0;
+    } catch (const CLI::ParseError& e) {
+        // One line, as INTERFACES §3 asks; --help has the details.
+        err << "edgetrack: " << e.what() << "\n";
+        return kExitUsage;
+    }
+
+    if (runCommand->parsed())
+        return notBuilt(err, "run", 7);
+    if (simCommand->parsed()) {
+        if (!sim.list && (sim.scene.empty() || sim.frames == 0 || sim.out.empty())) {
+            err << "edgetrack sim: --scene, --frames and --out are required (or --list)\n";
+            return kExitUsage;
+        }
+        return notBuilt(err, "sim", 3);
+    }
+    if (reconstructCommand->parsed())
+        return notBuilt(err, "reconstruct", 4);
+    if (calibrateCommand->parsed())
+        return notBuilt(err, "calibrate", 5);
+    if (trackCommand->parsed())
+        return notBuilt(err, "track", 6);
+    if (modelCommand->parsed())
+        return notBuilt(err, "model", 7);
+    return kExitUsage;
+}
+
+} // namespace edgetrack::app

@@ -1,0 +1,113 @@
+// Tests of the strict CSV parser: every malformed input gets a one-line error with file and line.
+#include <array>
+
+#include <gtest/gtest.h>
+
+#include "firmware_app/recording/csv.hpp"
+
+using namespace edgetrack;
+using namespace edgetrack::recording;
+
+namespace {
+
+constexpr std::array<CsvColumn, 5> kBlobColumns{{{"frame", ColumnType::Integer},
+                                                 {"camera", ColumnType::Integer},
+                                                 {"u", ColumnType::Real},
+                                                 {"v", ColumnType::Real},
+                                                 {"area", ColumnType::Real, true}}};
+
+std::string errorOf(std::string_view text) {
+    const Result<CsvTable> r = parseCsv(text, "rec/blobs.csv", kBlobColumns);
+    EXPECT_FALSE(r.isValid()) << "accepted: " << text;
+    if (r.isValid())
+        return {};
+    EXPECT_EQ(r.error().message.find('\n'), std::string::npos) << "error is not one line";
+    return r.error().message;
+}
+
+} // namespace
+
+TEST(Csv, ParsesWithAndWithoutOptionalColumn) {
+    const auto with = parseCsv("frame,camera,u,v,area\n0,1,10.5,20.25,7\n", "x", kBlobColumns);
+    ASSERT_TRUE(with);
+    EXPECT_EQ(with->columnCount, 5u);
+    ASSERT_EQ(with->rows.size(), 1u);
+    EXPECT_EQ(with->rows[0].integer(1), 1);
+    EXPECT_DOUBLE_EQ(with->rows[0][4], 7.0);
+
+    const auto without = parseCsv("frame,camera,u,v\r\n3,0,1e2,-2.5\r\n", "x", kBlobColumns);
+    ASSERT_TRUE(without);
+    EXPECT_EQ(without->columnCount, 4u);
+    EXPECT_DOUBLE_EQ(without->rows[0][2], 100.0);
+    EXPECT_EQ(without->rows[0].line, 2u);
+}
+
+TEST(Csv, HeaderOnlyIsAnEmptyTable) {
+    const auto r = parseCsv("frame,camera,u,v\n", "x", kBlobColumns);
+    ASSERT_TRUE(r);
+    EXPECT_TRUE(r->rows.empty());
+}
+
+TEST(Csv, MissingHeader) {
+    EXPECT_EQ(errorOf(""), "rec/blobs.csv:1: missing header, expected \"frame,camera,u,v[,area]\"");
+}
+
+TEST(Csv, BadHeader) {
+    EXPECT_EQ(
+        errorOf("frame,cam,u,v\n0,0,1,2\n"),
+        "rec/blobs.csv:1: bad header \"frame,cam,u,v\", expected \"frame,camera,u,v[,area]\"");
+    // Data where the header should be is a bad header too.
+    EXPECT_NE(errorOf("0,0,1,2\n").find("rec/blobs.csv:1: bad header"), std::string::npos);
+}
+
+TEST(Csv, MissingColumn) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,2\n1,0,3\n"),
+              "rec/blobs.csv:3: expected 4 fields, found 3");
+}
+
+TEST(Csv, ExtraColumn) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,2,9\n"),
+              "rec/blobs.csv:2: expected 4 fields, found 5");
+}
+
+TEST(Csv, TextInANumberField) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,abc,2\n"),
+              "rec/blobs.csv:2: field 'u' is not a number: \"abc\"");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,,2\n"),
+              "rec/blobs.csv:2: field 'u' is not a number: \"\"");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1.5x,2\n"),
+              "rec/blobs.csv:2: field 'u' is not a number: \"1.5x\"");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1;5,2\n"),
+              "rec/blobs.csv:2: field 'u' is not a number: \"1;5\"");
+}
+
+TEST(Csv, FractionInAnIntegerField) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0.5,0,1,2\n"),
+              "rec/blobs.csv:2: field 'frame' is not an integer: \"0.5\"");
+}
+
+TEST(Csv, NanAndInfinity) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,nan,2\n"),
+              "rec/blobs.csv:2: field 'u' is \"nan\": NaN and infinity are not allowed");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,-inf\n"),
+              "rec/blobs.csv:2: field 'v' is \"-inf\": NaN and infinity are not allowed");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,1e999\n"),
+              "rec/blobs.csv:2: field 'v' is not a number: \"1e999\"");
+}
+
+TEST(Csv, EmptyLineInTheMiddle) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,2\n\n1,0,1,2\n"), "rec/blobs.csv:3: empty line");
+}
+
+TEST(Csv, LongGarbageIsShortenedInTheMessage) {
+    const std::string garbage(500, 'x');
+    const std::string message = errorOf("frame,camera,u,v\n0,0," + garbage + ",2\n");
+    EXPECT_LT(message.size(), 120u);
+    EXPECT_NE(message.find("..."), std::string::npos);
+}
+
+TEST(Csv, NumbersRoundTripExactly) {
+    std::string line;
+    appendCsvLine(line, std::int64_t{42}, 0.1, -1234.56789012345, 1e-300, 3.0);
+    EXPECT_EQ(line, "42,0.1,-1234.56789012345,1e-300,3\n");
+}

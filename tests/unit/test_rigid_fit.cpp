@@ -1,0 +1,100 @@
+// Tests of the least-squares rigid fit against known transforms and against Eigen::umeyama.
+#include <random>
+#include <vector>
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include "core/rigid_fit.hpp"
+#include "tests/support/alloc_guard.hpp"
+
+using namespace edgetrack;
+
+namespace {
+
+struct PointSets {
+    std::vector<Vec3> model_mm;
+    std::vector<Vec3> rig_mm;
+    RigidTransform T_rig_from_model;
+};
+
+PointSets makeSets(int count, double noise_mm, unsigned seed) {
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> cube(-35.0, 35.0);
+    std::normal_distribution<double> noise(0.0, noise_mm);
+    PointSets s;
+    s.T_rig_from_model.rotation = Quat(Eigen::AngleAxisd(2.1, Vec3(0.3, 0.9, -0.2).normalized()));
+    s.T_rig_from_model.translation_mm = {-20.0, 35.0, 560.0};
+    for (int i = 0; i < count; ++i) {
+        const Vec3 p{cube(random), cube(random), cube(random)};
+        s.model_mm.push_back(p);
+        s.rig_mm.push_back(s.T_rig_from_model.apply(p) +
+                           Vec3{noise(random), noise(random), noise(random)});
+    }
+    return s;
+}
+
+} // namespace
+
+TEST(RigidFit, RecoversExactTransform) {
+    const PointSets s = makeSets(12, 0.0, 1);
+    const auto fit = fitRigid(s.model_mm, s.rig_mm);
+    ASSERT_TRUE(fit);
+    EXPECT_LT(fit->rms_mm, 1e-9);
+    EXPECT_LT((fit->transform.translation_mm - s.T_rig_from_model.translation_mm).norm(), 1e-9);
+    EXPECT_LT(rotationAngleBetween_rad(fit->transform.rotation, s.T_rig_from_model.rotation), 1e-7);
+}
+
+TEST(RigidFit, AgreesWithEigenUmeyamaOnNoisyData) {
+    const PointSets s = makeSets(30, 0.2, 2);
+    const auto fit = fitRigid(s.model_mm, s.rig_mm);
+    ASSERT_TRUE(fit);
+
+    Eigen::Matrix3Xd from(3, 30), to(3, 30);
+    for (int i = 0; i < 30; ++i) {
+        from.col(i) = s.model_mm[static_cast<std::size_t>(i)];
+        to.col(i) = s.rig_mm[static_cast<std::size_t>(i)];
+    }
+    const Eigen::Matrix4d reference = Eigen::umeyama(from, to, false);
+    EXPECT_LT((fit->transform.rotationMatrix() - reference.topLeftCorner<3, 3>()).norm(), 1e-9);
+    EXPECT_LT((fit->transform.translation_mm - reference.topRightCorner<3, 1>()).norm(), 1e-9);
+    // Residual of 0.2 mm per axis: sqrt(3) * 0.2 expected, less the fit's degrees of freedom.
+    EXPECT_GT(fit->rms_mm, 0.2);
+    EXPECT_LT(fit->rms_mm, 0.45);
+}
+
+TEST(RigidFit, PlanarPointsGiveAProperRotation) {
+    // Four coplanar points: the SVD alone could return a reflection.
+    const std::vector<Vec3> model{{0, 0, 0}, {50, 0, 0}, {0, 50, 0}, {50, 50, 0}};
+    RigidTransform T;
+    T.rotation = Quat(Eigen::AngleAxisd(3.0, Vec3(1, 1, 0).normalized()));
+    T.translation_mm = {5, 6, 7};
+    std::vector<Vec3> rig;
+    for (const Vec3& p : model)
+        rig.push_back(T.apply(p));
+    const auto fit = fitRigid(model, rig);
+    ASSERT_TRUE(fit);
+    EXPECT_NEAR(fit->transform.rotationMatrix().determinant(), 1.0, 1e-12);
+    EXPECT_LT(fit->rms_mm, 1e-9);
+}
+
+TEST(RigidFit, RefusesDegenerateInput) {
+    const std::vector<Vec3> two{{0, 0, 0}, {1, 0, 0}};
+    EXPECT_FALSE(fitRigid(two, two));
+    const std::vector<Vec3> collinear{{0, 0, 0}, {10, 0, 0}, {25, 0, 0}, {-3, 0, 0}};
+    EXPECT_FALSE(fitRigid(collinear, collinear));
+    const std::vector<Vec3> three{{0, 0, 0}, {10, 0, 0}, {0, 10, 0}};
+    EXPECT_FALSE(fitRigid(three, collinear));
+    EXPECT_TRUE(fitRigid(three, three));
+}
+
+TEST(RigidFit, DoesNotAllocate) {
+    const PointSets s = makeSets(30, 0.1, 3);
+    double sink = 0.0;
+    const auto count = test::countAllocations([&] {
+        for (int i = 0; i < 100; ++i)
+            sink += fitRigid(s.model_mm, s.rig_mm)->rms_mm;
+    });
+    EXPECT_EQ(count, 0u);
+    EXPECT_GT(sink, 0.0);
+}

@@ -1,0 +1,30 @@
+# CMake toolchain: cross build for the board (Cortex-A72/A76) with Debian's g++-aarch64-linux-gnu.
+#
+# Libraries come from Debian's arm64 multiarch packages (libgtest-dev:arm64, ...), installed by
+# toolchain/install-deps.sh aarch64. Tests run under qemu-aarch64 (package qemu-user) with a hard
+# time limit, because qemu-user ignores SIGTERM when a guest spins (see toolchain/README.md).
+set(CMAKE_SYSTEM_NAME Linux)
+set(CMAKE_SYSTEM_PROCESSOR aarch64)
+
+set(CMAKE_C_COMPILER aarch64-linux-gnu-gcc)
+set(CMAKE_CXX_COMPILER aarch64-linux-gnu-g++)
+set(CMAKE_LIBRARY_ARCHITECTURE aarch64-linux-gnu)
+
+# Cortex-A72 is the oldest core we ship on; the code runs unchanged on the A76.
+set(CMAKE_C_FLAGS_INIT "-mcpu=cortex-a72")
+set(CMAKE_CXX_FLAGS_INIT "-mcpu=cortex-a72")
+
+# The multiarch libraries live in the host's own root, under lib/aarch64-linux-gnu.
+set(CMAKE_FIND_ROOT_PATH /usr/aarch64-linux-gnu /usr)
+set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
+set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
+set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE BOTH)
+set(CMAKE_FIND_ROOT_PATH_MODE_PACKAGE BOTH)
+set(ENV{PKG_CONFIG_LIBDIR} "/usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig")
+
+# Plain qemu-aarch64 with the multiarch loader; never "-L /usr/aarch64-linux-gnu" (it mixes two
+# C libraries). SIGKILL after 280 s so a spinning guest cannot hang CI.
+find_program(EDGETRACK_QEMU_AARCH64 qemu-aarch64)
+if(EDGETRACK_QEMU_AARCH64)
+    set(CMAKE_CROSSCOMPILING_EMULATOR timeout;-s;KILL;280;${EDGETRACK_QEMU_AARCH64})
+endif()

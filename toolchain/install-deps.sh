@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Installs edgetrack's build and test dependencies from Debian 12 packages (run as root).
+#
+#   toolchain/install-deps.sh            host build, tests and benchmarks
+#   toolchain/install-deps.sh aarch64    also the cross compiler, qemu-user and arm64 libraries
+set -euo pipefail
+
+if [ "$(id -u)" -ne 0 ]; then
+    echo "install-deps.sh: run as root (sudo $0 $*)" >&2
+    exit 1
+fi
+export DEBIAN_FRONTEND=noninteractive
+apt_install() { apt-get install -y -q --no-install-recommends "$@"; }
+
+host_packages=(
+    build-essential cmake ninja-build pkg-config git clang-format
+    libeigen3-dev libtomlplusplus-dev libcli11-dev libsimde-dev
+    zlib1g-dev libsystemd-dev
+    libgtest-dev libgmock-dev libbenchmark-dev
+)
+
+apt-get update -q
+apt_install "${host_packages[@]}"
+
+if [ "${1:-}" = "aarch64" ]; then
+    # Debian's multiarch arm64 -dev packages link the cross build; qemu-user runs its tests.
+    if ! dpkg --print-foreign-architectures | grep -qx arm64; then
+        dpkg --add-architecture arm64
+        apt-get update -q
+    fi
+    apt_install g++-aarch64-linux-gnu qemu-user \
+        libc6:arm64 libstdc++6:arm64 \
+        libgtest-dev:arm64 libgmock-dev:arm64 libbenchmark-dev:arm64 \
+        zlib1g-dev:arm64 libsystemd-dev:arm64
+fi
