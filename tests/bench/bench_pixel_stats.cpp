@@ -10,8 +10,7 @@
 
 namespace {
 
-std::vector<std::uint8_t> makeFrame()
-{
+std::vector<std::uint8_t> makeFrame() {
     std::vector<std::uint8_t> frame(1280u * 800u);
     std::uint32_t state = 12345;
     for (auto& p : frame) {
@@ -21,8 +20,7 @@ std::vector<std::uint8_t> makeFrame()
     return frame;
 }
 
-void BM_MeasurePixels(benchmark::State& state)
-{
+void BM_MeasurePixels(benchmark::State& state) {
     const auto frame = makeFrame();
     for (auto _ : state)
         benchmark::DoNotOptimize(edgetrack::measurePixels(frame, 200));
@@ -33,8 +31,7 @@ void BM_MeasurePixels(benchmark::State& state)
 BENCHMARK(BM_MeasurePixels);
 
 // The memory floor: summing the bytes touches each once and does the least work possible.
-void BM_PlainRead(benchmark::State& state)
-{
+void BM_PlainRead(benchmark::State& state) {
     const auto frame = makeFrame();
     for (auto _ : state)
         benchmark::DoNotOptimize(std::accumulate(frame.begin(), frame.end(), std::uint64_t{0}));

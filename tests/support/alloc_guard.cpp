@@ -11,8 +11,9 @@
 #if defined(__SANITIZE_ADDRESS__)
 #define EDGETRACK_ALLOC_VIA_SANITIZER 1
 // Part of the sanitizer runtime's public interface; GCC ships no header for it.
-extern "C" int __sanitizer_install_malloc_and_free_hooks(
-    void (*mallocHook)(const volatile void*, std::size_t), void (*freeHook)(const volatile void*));
+extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*mallocHook)(const volatile void*,
+                                                                            std::size_t),
+                                                         void (*freeHook)(const volatile void*));
 #else
 #define EDGETRACK_ALLOC_VIA_SANITIZER 0
 #endif
