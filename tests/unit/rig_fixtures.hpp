@@ -28,7 +28,7 @@ inline StereoRig desktopRig(double baseline_mm = 120.0, double toeIn_rad = 0.05,
                             double k2 = 0.03) {
     CameraExtrinsics ex0;
     CameraExtrinsics ex1;
-    ex1.rotation_cam_from_rig = rotationAboutY(-toeIn_rad);
+    ex1.rotation_cam_from_rig = rotationAboutY(toeIn_rad);
     const Vec3 centre1{baseline_mm, 0.0, 0.0};
     ex1.translation_cam_from_rig_mm = -(ex1.rotation_cam_from_rig * centre1);
     CameraIntrinsics in1 = desktopIntrinsics(k1, k2);
