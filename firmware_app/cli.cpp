@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include "firmware_app/recording/recording.hpp"
+#include "firmware_app/sim_command.hpp"
 
 namespace edgetrack::app {
 
@@ -138,11 +139,27 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     if (runCommand->parsed())
         return notBuilt(err, "run", 7);
     if (simCommand->parsed()) {
-        if (!sim.list && (sim.scene.empty() || sim.frames == 0 || sim.out.empty())) {
+        if (sim.list) {
+            listScenes(out);
+            return 0;
+        }
+        if (sim.scene.empty() || sim.frames == 0 || sim.out.empty()) {
             err << "edgetrack sim: --scene, --frames and --out are required (or --list)\n";
             return kExitUsage;
         }
-        return notBuilt(err, "sim", 3);
+        SimRecordingOptions options;
+        options.scene = sim.scene;
+        options.frames = sim.frames;
+        options.out = sim.out;
+        options.seed = sim.seed;
+        options.level = *recording::parseLevel(sim.level);
+        if (Status s = writeSimRecording(options); !s) {
+            err << "edgetrack sim: " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        out << "edgetrack sim: wrote " << sim.frames << " frames of '" << sim.scene << "' ("
+            << sim.level << " level, seed " << sim.seed << ") to " << sim.out << "\n";
+        return 0;
     }
     if (reconstructCommand->parsed())
         return notBuilt(err, "reconstruct", 4);

@@ -6,6 +6,11 @@
 # -DEXPECT_EXIT=N  expected exit code
 # -DEXPECT_STDOUT=regex, -DEXPECT_STDERR=regex   optional patterns the streams must match
 # -DSTDERR_ONE_LINE=ON   stderr must be exactly one line
+# -DCLEAN_DIR=path       removed before the run, so the case starts from nothing
+# -DEXPECT_FILES=a;b     files (relative to CLEAN_DIR) that must exist afterwards
+if(DEFINED CLEAN_DIR)
+    file(REMOVE_RECURSE "${CLEAN_DIR}")
+endif()
 execute_process(COMMAND ${EMULATOR} ${PROGRAM} ${ARGS}
                 RESULT_VARIABLE exit_code
                 OUTPUT_VARIABLE out
@@ -27,3 +32,8 @@ if(STDERR_ONE_LINE)
         message(FATAL_ERROR "stderr should be one line, has ${lines}\n${shown}")
     endif()
 endif()
+foreach(expected IN LISTS EXPECT_FILES)
+    if(NOT EXISTS "${CLEAN_DIR}/${expected}")
+        message(FATAL_ERROR "missing ${CLEAN_DIR}/${expected}\n${shown}")
+    endif()
+endforeach()

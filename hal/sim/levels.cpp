@@ -1,0 +1,131 @@
+// Blob-level and point-level views of an observation, as a perfect detector would report them.
+#include "hal/sim/levels.hpp"
+
+#include <numbers>
+
+namespace edgetrack::sim {
+
+namespace {
+
+struct Spot {
+    Vec2 centre_px;
+    double radius_px;
+    int group;
+    /// Index into markers followed by spuriousPoints; -1 for a glint.
+    int source;
+};
+
+// Spots whose discs touch (with the edge blur) form one blob; returns spots with group labels.
+void groupSpots(const Observation& observation, int camera, std::vector<Spot>& spots) {
+    const auto c = static_cast<std::size_t>(camera);
+    spots.clear();
+    int source = 0;
+    for (const MarkerView& m : observation.markers) {
+        if (m.visible[c])
+            spots.push_back({m.pixel[c], m.radius_px[c], -1, source});
+        ++source;
+    }
+    for (const MarkerView& m : observation.spuriousPoints) {
+        if (m.visible[c])
+            spots.push_back({m.pixel[c], m.radius_px[c], -1, source});
+        ++source;
+    }
+    // Every glint takes part in merging (a streak across a marker spoils it too), but only round
+    // ones are reported as blobs.
+    for (const Glint& g : observation.glints[c])
+        spots.push_back({g.centre_px, g.isRound() ? g.radiusMinor_px : g.radiusMajor_px, -1,
+                         g.isRound() ? -1 : -2});
+
+    const double blurMargin_px = 2.0 * FrameRenderer::kEdgeBlur_px;
+    for (std::size_t i = 0; i < spots.size(); ++i) {
+        if (spots[i].group < 0)
+            spots[i].group = static_cast<int>(i);
+        for (std::size_t j = i + 1; j < spots.size(); ++j) {
+            const double reach = spots[i].radius_px + spots[j].radius_px + blurMargin_px;
+            if ((spots[i].centre_px - spots[j].centre_px).norm() >= reach)
+                continue;
+            // Union: relabel j's whole group to i's.
+            const int from = spots[j].group, to = spots[i].group;
+            if (from < 0) {
+                spots[j].group = to;
+            } else if (from != to) {
+                for (Spot& s : spots)
+                    if (s.group == from)
+                        s.group = to;
+            }
+        }
+    }
+}
+
+} // namespace
+
+void blobsFromObservation(const Observation& observation, int camera, const LevelNoise& noise,
+                          Random& random, std::vector<SimBlob>& out) {
+    thread_local std::vector<Spot> spots;
+    groupSpots(observation, camera, spots);
+    out.clear();
+    for (std::size_t g = 0; g < spots.size(); ++g) {
+        if (spots[g].group != static_cast<int>(g))
+            continue;
+        bool rejected = false;
+        for (const Spot& s : spots)
+            rejected = rejected || (s.group == static_cast<int>(g) && s.source == -2);
+        if (rejected)
+            continue; // not round: the detector drops it
+        Vec2 weighted = Vec2::Zero();
+        double area = 0.0;
+        for (const Spot& s : spots)
+            if (s.group == static_cast<int>(g)) {
+                const double a = std::numbers::pi * s.radius_px * s.radius_px;
+                weighted += a * s.centre_px;
+                area += a;
+            }
+        SimBlob blob;
+        blob.centre_px = weighted / area + Vec2(random.normal(noise.blobCentreSigma_px),
+                                                random.normal(noise.blobCentreSigma_px));
+        blob.area_px = area;
+        out.push_back(blob);
+    }
+}
+
+void pointsFromObservation(const Observation& observation, const LevelNoise& noise, Random& random,
+                           std::vector<Vec3>& out) {
+    thread_local std::array<std::vector<Spot>, 2> spots;
+    thread_local std::array<std::vector<int>, 2> groupSize;
+    thread_local std::array<std::vector<int>, 2> groupOfSource;
+    const std::size_t sources = observation.markers.size() + observation.spuriousPoints.size();
+    for (int camera = 0; camera < 2; ++camera) {
+        const auto c = static_cast<std::size_t>(camera);
+        groupSpots(observation, camera, spots[c]);
+        groupSize[c].assign(spots[c].size(), 0);
+        groupOfSource[c].assign(sources, -1);
+        for (const Spot& s : spots[c]) {
+            ++groupSize[c][static_cast<std::size_t>(s.group)];
+            if (s.source >= 0)
+                groupOfSource[c][static_cast<std::size_t>(s.source)] = s.group;
+        }
+    }
+
+    out.clear();
+    std::size_t source = 0;
+    auto consider = [&](const MarkerView& m) {
+        const std::size_t i = source++;
+        for (std::size_t c = 0; c < 2; ++c) {
+            const int group = groupOfSource[c][i];
+            if (group < 0 || groupSize[c][static_cast<std::size_t>(group)] != 1)
+                return; // unseen, or merged with another spot in this camera
+        }
+        out.push_back(m.position_rig_mm + Vec3(random.normal(noise.pointSigma_mm),
+                                               random.normal(noise.pointSigma_mm),
+                                               random.normal(noise.pointSigma_mm)));
+    };
+    for (const MarkerView& m : observation.markers)
+        consider(m);
+    for (const MarkerView& m : observation.spuriousPoints)
+        consider(m);
+    // INTERFACES §1: points come in any order; shuffling keeps consumers honest.
+    for (std::size_t i = out.size(); i > 1; --i)
+        std::swap(out[i - 1], out[random.below(i)]);
+}
+
+} // namespace edgetrack::sim

@@ -1,0 +1,380 @@
+// Simulated world: marker objects, their motions, occluders, spurious reflections, named scenes.
+#include "hal/sim/scene.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+
+#include "hal/sim/random.hpp"
+
+namespace edgetrack::sim {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// A rectangle on an object's surface where markers may be stuck.
+struct Patch {
+    Vec3 centre_mm;
+    Vec3 uAxis;
+    Vec3 vAxis;
+    double uHalf_mm;
+    double vHalf_mm;
+    int count;
+};
+
+// Scatters markers over patches by rejection sampling with a minimum spacing, from a fixed seed:
+// the object is a physical thing, the same in every scene and for every scene seed.
+std::vector<SimMarker> scatter(const std::vector<Patch>& patches, double margin_mm,
+                               double minSpacing_mm, std::uint64_t layoutSeed) {
+    Random random(layoutSeed);
+    std::vector<SimMarker> markers;
+    for (const Patch& patch : patches) {
+        const Vec3 normal = patch.uAxis.cross(patch.vAxis).normalized();
+        int placed = 0;
+        for (int attempt = 0; placed < patch.count && attempt < 100000; ++attempt) {
+            const double u =
+                random.uniform(-patch.uHalf_mm + margin_mm, patch.uHalf_mm - margin_mm);
+            const double v =
+                random.uniform(-patch.vHalf_mm + margin_mm, patch.vHalf_mm - margin_mm);
+            const Vec3 p = patch.centre_mm + u * patch.uAxis + v * patch.vAxis;
+            const bool apart = std::all_of(markers.begin(), markers.end(), [&](const SimMarker& m) {
+                return (m.position_object_mm - p).norm() >= minSpacing_mm;
+            });
+            if (apart) {
+                markers.push_back({p, normal});
+                ++placed;
+            }
+        }
+    }
+    return markers;
+}
+
+std::vector<Patch> cubeFaces(double half_mm, int perFace) {
+    const Vec3 x = Vec3::UnitX(), y = Vec3::UnitY(), z = Vec3::UnitZ();
+    // u x v points outward on every face.
+    return {{half_mm * x, y, z, half_mm, half_mm, perFace},
+            {-half_mm * x, z, y, half_mm, half_mm, perFace},
+            {half_mm * y, z, x, half_mm, half_mm, perFace},
+            {-half_mm * y, x, z, half_mm, half_mm, perFace},
+            {half_mm * z, x, y, half_mm, half_mm, perFace},
+            {-half_mm * z, y, x, half_mm, half_mm, perFace}};
+}
+
+double smoothstep(double edge0, double edge1, double x) {
+    const double t = std::clamp((x - edge0) / (edge1 - edge0), 0.0, 1.0);
+    return t * t * (3.0 - 2.0 * t);
+}
+
+Quat randomRotation(Random& random) {
+    // Shoemake's uniform quaternion.
+    const double u1 = random.uniform(), u2 = random.uniform(), u3 = random.uniform();
+    const double a = std::sqrt(1.0 - u1), b = std::sqrt(u1);
+    return Quat(a * std::sin(2.0 * kPi * u2), a * std::cos(2.0 * kPi * u2),
+                b * std::sin(2.0 * kPi * u3), b * std::cos(2.0 * kPi * u3))
+        .normalized();
+}
+
+} // namespace
+
+MarkerObject makeCube70() {
+    MarkerObject cube;
+    cube.name = "cube70";
+    cube.markerDiameter_mm = 6.0;
+    cube.markers = scatter(cubeFaces(35.0, 5), 7.0, 15.0, 70);
+    cube.bodyBoxes.push_back({Vec3::Zero(), Vec3::Constant(35.0)});
+    return cube;
+}
+
+MarkerObject makeCube50() {
+    MarkerObject cube;
+    cube.name = "cube50";
+    cube.markerDiameter_mm = 5.0;
+    cube.markers = scatter(cubeFaces(25.0, 4), 6.0, 13.0, 50);
+    cube.bodyBoxes.push_back({Vec3::Zero(), Vec3::Constant(25.0)});
+    return cube;
+}
+
+MarkerObject makeSphere70() {
+    MarkerObject sphere;
+    sphere.name = "sphere70";
+    sphere.markerDiameter_mm = 6.0;
+    sphere.bodyRadius_mm = 35.0;
+    // A Fibonacci lattice, jittered from a fixed seed so the sphere has no symmetry to confuse.
+    Random random(24);
+    const int count = 24;
+    const double golden = kPi * (3.0 - std::sqrt(5.0));
+    for (int i = 0; i < count; ++i) {
+        const double z = 1.0 - 2.0 * (i + 0.5) / count;
+        const double r = std::sqrt(1.0 - z * z);
+        const double azimuth = golden * i + random.uniform(-0.25, 0.25);
+        const double tilt = random.uniform(-0.08, 0.08);
+        Vec3 n(r * std::cos(azimuth), r * std::sin(azimuth), z + tilt);
+        n.normalize();
+        sphere.markers.push_back({35.0 * n, n});
+    }
+    return sphere;
+}
+
+MarkerObject makeToyCar() {
+    MarkerObject car;
+    car.name = "toy_car";
+    car.markerDiameter_mm = 6.0;
+    const Vec3 x = Vec3::UnitX(), y = Vec3::UnitY(), z = Vec3::UnitZ();
+    // Body 110 x 50 x 35 mm, cabin 54 x 44 x 22 mm on top of it; origin at the body's centre.
+    const BodyBox body{Vec3::Zero(), Vec3(55.0, 25.0, 17.5)};
+    const BodyBox cabin{Vec3(-5.0, 0.0, 28.5), Vec3(27.0, 22.0, 11.0)};
+    car.bodyBoxes = {body, cabin};
+    const std::vector<Patch> patches{
+        {Vec3(40.0, 0.0, 17.5), x, y, 15.0, 25.0, 4},   // hood
+        {Vec3(-43.0, 0.0, 17.5), x, y, 12.0, 25.0, 3},  // trunk
+        {Vec3(0.0, 25.0, 0.0), z, x, 17.5, 55.0, 7},    // left side
+        {Vec3(0.0, -25.0, 0.0), x, z, 55.0, 17.5, 7},   // right side
+        {Vec3(55.0, 0.0, 0.0), y, z, 25.0, 17.5, 3},    // front
+        {Vec3(-55.0, 0.0, 0.0), z, y, 17.5, 25.0, 3},   // back
+        {Vec3(-5.0, 0.0, 39.5), x, y, 27.0, 22.0, 5},   // roof
+        {Vec3(-5.0, 22.0, 28.5), z, x, 11.0, 27.0, 2},  // cabin left
+        {Vec3(-5.0, -22.0, 28.5), x, z, 27.0, 11.0, 2}, // cabin right
+        {Vec3(22.0, 0.0, 28.5), y, z, 22.0, 11.0, 1},   // windscreen
+        {Vec3(-32.0, 0.0, 28.5), z, y, 11.0, 22.0, 1},  // rear window
+    };
+    car.markers = scatter(patches, 5.0, 13.0, 38);
+    return car;
+}
+
+MarkerObject makeWand() {
+    MarkerObject wand;
+    wand.name = "wand";
+    wand.markerDiameter_mm = 14.0;
+    // Spherical markers on a stick: seen from every side, so no normal.
+    wand.markers = {{Vec3(-78.5, 0.0, 0.0), Vec3::Zero()},
+                    {Vec3(-23.5, 0.0, 0.0), Vec3::Zero()},
+                    {Vec3(78.5, 0.0, 0.0), Vec3::Zero()}};
+    return wand;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+Motion::Motion(const MotionSpec& spec, std::uint64_t seed)
+    : spec_(spec) {
+    Random random(seed);
+    initial_ = randomRotation(random);
+    spinAxis_ = Vec3(random.uniform(-0.3, 0.3), 1.0, random.uniform(-0.3, 0.3)).normalized();
+    tumbleAxis_ = spinAxis_.cross(Vec3(random.uniform(-0.5, 0.5), 0.0, 1.0)).normalized();
+    // Three incommensurate waves per axis make a path that does not visibly repeat.
+    const std::array<double, 3> shares{0.65, 0.25, 0.10};
+    const std::array<double, 3> harmonics{1.0, 1.73, 2.91};
+    const std::array<double, 3> shakeHarmonics{1.0, 2.3, 3.7};
+    for (int axis = 0; axis < 3; ++axis) {
+        for (std::size_t k = 0; k < 3; ++k) {
+            wander_[axis].push_back(
+                {spec.wanderAmplitude_mm[axis] * shares[k],
+                 spec.wanderFrequency_hz * harmonics[k] * random.uniform(0.8, 1.2),
+                 random.uniform(0.0, 2.0 * kPi)});
+            shake_[axis].push_back(
+                {spec.shakeAmplitude_mm * shares[k],
+                 spec.shakeFrequency_hz * shakeHarmonics[k] * random.uniform(0.8, 1.2),
+                 random.uniform(0.0, 2.0 * kPi)});
+            twist_[axis].push_back(
+                {spec.shakeAmplitude_rad * shares[k],
+                 spec.shakeFrequency_hz * shakeHarmonics[k] * random.uniform(0.8, 1.2),
+                 random.uniform(0.0, 2.0 * kPi)});
+        }
+    }
+}
+
+double Motion::sum(const std::vector<Wave>& waves, double t_s) {
+    double value = 0.0;
+    for (const Wave& w : waves)
+        value += w.amplitude * std::sin(2.0 * kPi * w.frequency_hz * t_s + w.phase);
+    return value;
+}
+
+RigidTransform Motion::poseAt(double t_s) const {
+    double erratic = 0.0;
+    if (spec_.erraticShare >= 1.0) {
+        erratic = 1.0;
+    } else if (spec_.erraticShare > 0.0) {
+        // Alternating blocks: calm, then erratic for erraticShare of each period.
+        const double phase = std::fmod(t_s / spec_.erraticPeriod_s, 1.0);
+        const double start = 1.0 - spec_.erraticShare;
+        erratic = smoothstep(start, start + 0.05, phase) * (1.0 - smoothstep(0.95, 1.0, phase));
+    }
+
+    Vec3 position = spec_.centre_rig_mm;
+    Vec3 twist = Vec3::Zero();
+    for (int axis = 0; axis < 3; ++axis) {
+        position[axis] += sum(wander_[axis], t_s) + erratic * sum(shake_[axis], t_s);
+        twist[axis] = erratic * sum(twist_[axis], t_s);
+    }
+    if (spec_.leaveAt_s >= 0.0 && spec_.returnAt_s > spec_.leaveAt_s) {
+        const double ramp_s = std::min(0.8, 0.5 * (spec_.returnAt_s - spec_.leaveAt_s));
+        const double away = smoothstep(spec_.leaveAt_s, spec_.leaveAt_s + ramp_s, t_s) *
+                            (1.0 - smoothstep(spec_.returnAt_s - ramp_s, spec_.returnAt_s, t_s));
+        position += away * spec_.leaveOffset_mm;
+    }
+
+    const Quat turning =
+        Quat(Eigen::AngleAxisd(spec_.spinRate_radps * t_s + twist.x(), spinAxis_)) *
+        Quat(Eigen::AngleAxisd(spec_.tumbleRate_radps * t_s + twist.y(), tumbleAxis_)) *
+        Quat(Eigen::AngleAxisd(twist.z(), Vec3::UnitZ()));
+    RigidTransform pose;
+    pose.rotation = (turning * initial_).normalized();
+    pose.translation_mm = position;
+    return pose;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+StereoRig makeRig(const RigSpec& spec) {
+    CameraIntrinsics in;
+    in.width_px = spec.width_px;
+    in.height_px = spec.height_px;
+    in.fx_px = spec.focal_px;
+    in.fy_px = spec.focal_px;
+    in.cx_px = 0.5 * (spec.width_px - 1);
+    in.cy_px = 0.5 * (spec.height_px - 1);
+    in.distortion = {spec.k1, spec.k2, 0.0, 0.0, 0.0};
+
+    CameraIntrinsics in1 = in;
+    // Two real lenses are never identical.
+    in1.fx_px *= 1.004;
+    in1.fy_px *= 1.003;
+    in1.cx_px += 3.5;
+    in1.cy_px -= 2.0;
+
+    CameraExtrinsics ex1;
+    const double toeIn = std::atan2(spec.baseline_mm, spec.convergenceDistance_mm);
+    // Turning about +y by the toe-in points camera 1's axis back toward -x, at camera 0's axis.
+    ex1.rotation_cam_from_rig = Eigen::AngleAxisd(toeIn, Vec3::UnitY()).toRotationMatrix();
+    const Vec3 centre1(spec.baseline_mm, 0.0, 0.0);
+    ex1.translation_cam_from_rig_mm = -(ex1.rotation_cam_from_rig * centre1);
+    return StereoRig(CameraModel(in, CameraExtrinsics{}), CameraModel(in1, ex1));
+}
+
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+constexpr std::array<SceneInfo, 10> kScenes{{
+    {"two_cubes", "7 cm and 5 cm cubes, slow and erratic, occluding each other (paper Table 1)"},
+    {"cube_sphere", "7 cm cube and 7 cm sphere turned slowly side by side (paper Figure 7)"},
+    {"toy_car", "toy car with 38 markers turned slowly to show every side"},
+    {"crowd", "six objects at once: two identical 7 cm cubes, 5 cm cube, sphere, car, wand"},
+    {"stress", "cube and sphere among many static, flickering and 3D spurious reflections"},
+    {"erratic_cube", "7 cm cube in fast erratic hand motion"},
+    {"leave_return", "7 cm cube leaves the view after 3 s and comes back at 6 s"},
+    {"hand_occlusion", "7 cm cube turned slowly while a hand passes in front of it"},
+    {"slow_cube", "7 cm cube alone, turned slowly: a calibration session"},
+    {"wand", "three-marker wand waved through the volume"},
+}};
+
+MotionSpec slowTurns(const Vec3& centre) {
+    MotionSpec m;
+    m.centre_rig_mm = centre;
+    m.wanderAmplitude_mm = {50.0, 35.0, 40.0};
+    m.spinRate_radps = 0.6;
+    m.tumbleRate_radps = 0.27;
+    m.erraticShare = 0.0;
+    return m;
+}
+
+MotionSpec erratic(const Vec3& centre) {
+    MotionSpec m = slowTurns(centre);
+    m.spinRate_radps = 1.2;
+    m.tumbleRate_radps = 0.7;
+    m.shakeAmplitude_mm = 25.0;
+    m.shakeAmplitude_rad = 0.35;
+    m.shakeFrequency_hz = 2.2;
+    m.erraticShare = 1.0;
+    return m;
+}
+
+} // namespace
+
+std::span<const SceneInfo> sceneCatalogue() {
+    return kScenes;
+}
+
+std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
+    Scene scene;
+    scene.name = std::string(name);
+    for (const SceneInfo& info : kScenes)
+        if (name == info.name)
+            scene.description = info.description;
+    if (scene.description.empty())
+        return std::nullopt;
+
+    // Each moving thing gets its own stream of phases, so adding one leaves the others alone.
+    std::uint64_t stream = seed * 1000;
+    auto add = [&scene, &stream](MarkerObject object, const MotionSpec& motion) {
+        scene.objects.push_back({std::move(object), Motion(motion, ++stream)});
+    };
+    const double midline = 0.5 * scene.rig.baseline_mm;
+
+    if (name == "two_cubes") {
+        // Calm and erratic blocks alternate; the paths cross so the cubes hide each other.
+        MotionSpec a = erratic({midline - 50.0, -10.0, 570.0});
+        a.wanderAmplitude_mm = {75.0, 35.0, 45.0};
+        a.erraticShare = 0.5;
+        a.shakeAmplitude_mm = 15.0;
+        a.shakeAmplitude_rad = 0.25;
+        MotionSpec b = a;
+        b.centre_rig_mm = {midline + 50.0, 10.0, 520.0};
+        b.erraticPeriod_s = 6.0;
+        add(makeCube70(), a);
+        add(makeCube50(), b);
+    } else if (name == "cube_sphere") {
+        add(makeCube70(), slowTurns({midline - 60.0, 0.0, 560.0}));
+        add(makeSphere70(), slowTurns({midline + 60.0, 0.0, 560.0}));
+    } else if (name == "toy_car") {
+        MotionSpec m = slowTurns({midline, 0.0, 580.0});
+        m.wanderAmplitude_mm = {40.0, 30.0, 30.0};
+        add(makeToyCar(), m);
+    } else if (name == "crowd") {
+        const std::array<Vec3, 6> centres{
+            Vec3(midline - 150.0, -85.0, 620.0), Vec3(midline, -85.0, 620.0),
+            Vec3(midline + 150.0, -85.0, 620.0), Vec3(midline - 150.0, 85.0, 620.0),
+            Vec3(midline, 85.0, 620.0),          Vec3(midline + 150.0, 85.0, 620.0)};
+        std::array<MarkerObject, 6> objects{makeCube70(),   makeCube70(), makeCube50(),
+                                            makeSphere70(), makeToyCar(), makeWand()};
+        for (std::size_t i = 0; i < objects.size(); ++i) {
+            MotionSpec m = slowTurns(centres[i]);
+            m.wanderAmplitude_mm = {25.0, 20.0, 30.0};
+            add(std::move(objects[i]), m);
+        }
+    } else if (name == "stress") {
+        add(makeCube70(), slowTurns({midline - 60.0, 0.0, 560.0}));
+        add(makeSphere70(), slowTurns({midline + 60.0, 0.0, 560.0}));
+        scene.spurious = {15, 12, 0.4, 10};
+    } else if (name == "erratic_cube") {
+        add(makeCube70(), erratic({midline, 0.0, 560.0}));
+    } else if (name == "leave_return") {
+        MotionSpec m = slowTurns({midline, 0.0, 560.0});
+        m.leaveAt_s = 3.0;
+        m.returnAt_s = 6.0;
+        add(makeCube70(), m);
+    } else if (name == "hand_occlusion") {
+        add(makeCube70(), slowTurns({midline, 0.0, 580.0}));
+        MotionSpec hand;
+        hand.centre_rig_mm = {midline, 30.0, 470.0};
+        hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
+        hand.wanderFrequency_hz = 0.15;
+        hand.spinRate_radps = 0.0;
+        hand.tumbleRate_radps = 0.0;
+        hand.erraticShare = 0.0;
+        scene.occluders.push_back({Motion(hand, ++stream), 40.0});
+    } else if (name == "slow_cube") {
+        add(makeCube70(), slowTurns({midline, 0.0, 560.0}));
+    } else if (name == "wand") {
+        MotionSpec m = erratic({midline, 0.0, 600.0});
+        m.wanderAmplitude_mm = {120.0, 80.0, 80.0};
+        m.shakeAmplitude_mm = 10.0;
+        m.shakeAmplitude_rad = 0.2;
+        add(makeWand(), m);
+    }
+    return scene;
+}
+
+} // namespace edgetrack::sim

@@ -1,0 +1,165 @@
+// Simulated world: marker objects, their motions, occluders, spurious reflections, named scenes.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/rigid_transform.hpp"
+#include "core/stereo_rig.hpp"
+
+namespace edgetrack::sim {
+
+/// \brief One retroreflective marker on an object, in the object's frame.
+struct SimMarker {
+    Vec3 position_object_mm = Vec3::Zero();
+    /// Outward surface normal (unit). Zero for a spherical marker on a post, seen from anywhere.
+    Vec3 normal_object = Vec3::Zero();
+};
+
+/// \brief An axis-aligned box of the object's body, in the object's frame; it hides markers.
+struct BodyBox {
+    Vec3 centre_object_mm = Vec3::Zero();
+    Vec3 halfExtent_mm = Vec3::Zero();
+};
+
+/// \brief A rigid object carrying markers: the paper's cubes, sphere and toy car, or a wand.
+struct MarkerObject {
+    std::string name;
+    std::vector<SimMarker> markers;
+    double markerDiameter_mm = 6.0;
+    std::vector<BodyBox> bodyBoxes;
+    /// A spherical body (radius > 0), centred on the object's origin.
+    double bodyRadius_mm = 0.0;
+};
+
+/// The paper's 7x7x7 cm cube with 30 markers, five per face, irregular so no face repeats.
+MarkerObject makeCube70();
+/// The paper's 5x5x5 cm cube, four markers per face.
+MarkerObject makeCube50();
+/// The paper's sphere of 7 cm diameter with 24 markers.
+MarkerObject makeSphere70();
+/// The paper's toy car with 38 markers on body and cabin.
+MarkerObject makeToyCar();
+/// A wand with three spherical markers on a line, 55 and 102 mm apart.
+MarkerObject makeWand();
+
+/**
+ * \brief How an object (or hand) moves: smooth wander, turning, erratic shake, leaving the view.
+ *
+ * Every term is a sum of sines with phases drawn from the seed, so a pose is a pure function of
+ * time: any frame can be rendered alone, in any order, and twice gives the same answer.
+ */
+struct MotionSpec {
+    Vec3 centre_rig_mm{60.0, 0.0, 550.0};
+    /// Slow wander around the centre, per axis.
+    Vec3 wanderAmplitude_mm{60.0, 40.0, 50.0};
+    double wanderFrequency_hz = 0.08;
+    /// Steady turning about two axes, so that over time every side faces the cameras.
+    double spinRate_radps = 0.5;
+    double tumbleRate_radps = 0.23;
+    /// Erratic hand motion: fast shake of position and orientation.
+    double shakeAmplitude_mm = 0.0;
+    double shakeAmplitude_rad = 0.0;
+    double shakeFrequency_hz = 2.0;
+    /// Share of time in erratic mode, in alternating blocks (0: never, 1: always).
+    double erraticShare = 1.0;
+    double erraticPeriod_s = 8.0;
+    /// Leave the view at leaveAt_s, be back by returnAt_s (negative: never leave).
+    double leaveAt_s = -1.0;
+    double returnAt_s = -1.0;
+    Vec3 leaveOffset_mm{700.0, 0.0, 0.0};
+};
+
+class Motion {
+public:
+    Motion() = default;
+    Motion(const MotionSpec& spec, std::uint64_t seed);
+
+    /// \return T_rig_from_object at time \a t_s.
+    RigidTransform poseAt(double t_s) const;
+
+private:
+    struct Wave {
+        double amplitude = 0.0;
+        double frequency_hz = 0.0;
+        double phase = 0.0;
+    };
+    static double sum(const std::vector<Wave>& waves, double t_s);
+
+    MotionSpec spec_{};
+    Quat initial_ = Quat::Identity();
+    Vec3 spinAxis_ = Vec3::UnitY();
+    Vec3 tumbleAxis_ = Vec3::UnitX();
+    std::vector<Wave> wander_[3];
+    std::vector<Wave> shake_[3];
+    std::vector<Wave> twist_[3];
+};
+
+/// \brief A hand or arm: a sphere that hides markers behind it.
+struct Occluder {
+    Motion motion;
+    double radius_mm = 40.0;
+};
+
+/// \brief Ambient IR reflections, independent of the LED ring.
+struct SpuriousSpec {
+    /// Per camera: fixed glints, some of them elongated streaks.
+    int staticPerCamera = 0;
+    /// Per camera: glints that come and go from frame to frame.
+    int flickeringPerCamera = 0;
+    double flickerProbability = 0.3;
+    /// Reflective points in the volume, seen by both cameras (a watch, a screw head).
+    int points3d = 0;
+};
+
+/// \brief The simulated rig's optics, like the paper's near-field desktop setup.
+struct RigSpec {
+    int width_px = 1280;
+    int height_px = 800;
+    double focal_px = 910.0;
+    double baseline_mm = 120.0;
+    /// Camera 1 is turned toward camera 0's axis so both look at this distance.
+    double convergenceDistance_mm = 550.0;
+    double k1 = -0.08;
+    double k2 = 0.02;
+};
+
+/// \brief Build the stereo rig of \a spec (camera 0 at the origin, camera 1 to its right).
+StereoRig makeRig(const RigSpec& spec);
+
+struct SceneObject {
+    MarkerObject object;
+    Motion motion;
+};
+
+/// \brief A complete simulated scene.
+struct Scene {
+    std::string name;
+    std::string description;
+    RigSpec rig;
+    double frameRate_hz = 100.0;
+    double exposure_s = 0.001;
+    std::vector<SceneObject> objects;
+    std::vector<Occluder> occluders;
+    SpuriousSpec spurious;
+    /// Sensor noise, digital numbers (standard deviation).
+    double noiseSigma_dn = 2.0;
+    /// Background level, digital numbers.
+    double background_dn = 10.0;
+};
+
+struct SceneInfo {
+    const char* name;
+    const char* description;
+};
+
+/// \return the named scenes, in the order `edgetrack sim --list` prints them.
+std::span<const SceneInfo> sceneCatalogue();
+
+/// \brief Build scene \a name with motions drawn from \a seed. \return nothing for an unknown name.
+std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed);
+
+} // namespace edgetrack::sim

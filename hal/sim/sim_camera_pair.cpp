@@ -1,0 +1,113 @@
+// Simulated camera pair: renders the world into buffers allocated once, lit by the sim LED ring.
+#include "hal/sim/sim_camera_pair.hpp"
+
+#include <cmath>
+
+namespace edgetrack::sim {
+
+SimCameraPair::SimCameraPair(const World& world, SimClock& clock, SimLedRing& led, int bufferPairs)
+    : world_(world)
+    , clock_(clock)
+    , led_(led)
+    , renderer_(world.scene().rig.width_px, world.scene().rig.height_px,
+                world.scene().background_dn, world.scene().noiseSigma_dn, world.seed())
+    , period_(static_cast<Nanoseconds>(std::llround(1e9 / world.scene().frameRate_hz)))
+    , exposure_(static_cast<Nanoseconds>(std::llround(world.scene().exposure_s * 1e9)))
+    , width_(world.scene().rig.width_px)
+    , height_(world.scene().rig.height_px) {
+    const std::size_t pairs = static_cast<std::size_t>(bufferPairs > 0 ? bufferPairs : 1);
+    buffers_.resize(2 * pairs);
+    held_.assign(pairs, false);
+}
+
+Status SimCameraPair::start() {
+    // Buffers are allocated here, once, as libcamera's FrameBufferAllocator does.
+    for (auto& buffer : buffers_)
+        buffer.resize(static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_));
+    std::fill(held_.begin(), held_.end(), false);
+    failed_ = false;
+    started_ = true;
+    // Stream from the next frame boundary after now.
+    nextIndex_ = static_cast<std::uint64_t>(std::max<Nanoseconds>(0, clock_.now()) / period_ + 1);
+    return Ok{};
+}
+
+void SimCameraPair::stop() {
+    started_ = false;
+}
+
+Nanoseconds SimCameraPair::exposureStart(std::uint64_t index) const {
+    // Frame index k has its mid-exposure at k * period, so truth time_s = k / rate.
+    return static_cast<Nanoseconds>(index) * period_ - exposure_ / 2;
+}
+
+Nanoseconds SimCameraPair::nextExposureStart() const {
+    return exposureStart(nextIndex_);
+}
+
+hal::AcquireStatus SimCameraPair::acquire(hal::StereoFrame& frame, Nanoseconds timeout) {
+    if (!started_)
+        return hal::AcquireStatus::Stopped;
+    if (failed_) {
+        ++counters_.failures;
+        return hal::AcquireStatus::Failed;
+    }
+    const Nanoseconds deadline = clock_.now() + timeout;
+    while (true) {
+        const std::uint64_t index = nextIndex_;
+        const Nanoseconds start = exposureStart(index);
+        const Nanoseconds ready = start + exposure_ + kSyncSkew + kReadout;
+        if (stalled_ || ready > deadline) {
+            clock_.advanceTo(deadline);
+            return hal::AcquireStatus::Timeout;
+        }
+        clock_.advanceTo(ready);
+        ++nextIndex_;
+
+        if (dropPartnerEvery_ > 0 && (index + 1) % dropPartnerEvery_ == 0) {
+            ++counters_.droppedUnpaired;
+            continue;
+        }
+        int slot = -1;
+        for (std::size_t i = 0; i < held_.size(); ++i)
+            if (!held_[i]) {
+                slot = static_cast<int>(i);
+                break;
+            }
+        if (slot < 0) {
+            ++counters_.droppedNoBuffer;
+            continue;
+        }
+
+        world_.observe(index, observation_);
+        const auto s = static_cast<std::size_t>(slot);
+        held_[s] = true;
+        frame.number = delivered_++;
+        frame.slot = slot;
+        for (int camera = 0; camera < 2; ++camera) {
+            const auto c = static_cast<std::size_t>(camera);
+            std::vector<std::uint8_t>& buffer = buffers_[2 * s + c];
+            const Nanoseconds begin = start + camera * kSyncSkew;
+            renderer_.render(buffer, width_, camera, observation_,
+                             led_.litFraction(begin, begin + exposure_), index);
+            hal::CameraFrame& out = frame.camera[c];
+            out.pixels = buffer.data();
+            out.width_px = width_;
+            out.height_px = height_;
+            out.stride_bytes = width_;
+            out.exposureStart = begin;
+            out.exposureEnd = begin + exposure_;
+            out.sequence = index;
+        }
+        led_.forgetBefore(start);
+        ++counters_.delivered;
+        return hal::AcquireStatus::Frame;
+    }
+}
+
+void SimCameraPair::release(const hal::StereoFrame& frame) {
+    if (frame.slot >= 0 && static_cast<std::size_t>(frame.slot) < held_.size())
+        held_[static_cast<std::size_t>(frame.slot)] = false;
+}
+
+} // namespace edgetrack::sim

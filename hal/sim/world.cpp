@@ -1,0 +1,290 @@
+// What the simulated cameras see: marker visibility, occlusion, spurious reflections, images.
+#include "hal/sim/world.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numbers>
+
+#include "hal/sim/random.hpp"
+
+namespace edgetrack::sim {
+
+namespace {
+
+// Flat markers stop reflecting toward the camera well before grazing incidence.
+constexpr double kMinFacingCosine = 0.2;
+// Brightness of a marker squarely facing the ring at the rig's convergence distance (DN).
+constexpr double kPeakAtReference_dn = 1100.0;
+constexpr double kReferenceDistance_mm = 550.0;
+constexpr double kSpuriousPointDiameter_mm = 3.0;
+constexpr double kSpuriousPointLitProbability = 0.8;
+
+std::uint64_t mix(std::uint64_t a, std::uint64_t b) {
+    std::uint64_t z = a * 0x9E3779B97F4A7C15ull ^ (b + 0x632BE59BD9B4E019ull);
+    z = (z ^ (z >> 31)) * 0xBF58476D1CE4E5B9ull;
+    return z ^ (z >> 29);
+}
+
+// Does the segment from a to b pass through the axis-aligned box (centre, half extent)?
+bool segmentHitsBox(const Vec3& a, const Vec3& b, const Vec3& centre, const Vec3& half) {
+    double enter = 0.0, leave = 1.0;
+    const Vec3 d = b - a;
+    for (int axis = 0; axis < 3; ++axis) {
+        const double low = centre[axis] - half[axis] - a[axis];
+        const double high = centre[axis] + half[axis] - a[axis];
+        if (std::abs(d[axis]) < 1e-12) {
+            if (low > 0.0 || high < 0.0)
+                return false;
+            continue;
+        }
+        double t0 = low / d[axis], t1 = high / d[axis];
+        if (t0 > t1)
+            std::swap(t0, t1);
+        enter = std::max(enter, t0);
+        leave = std::min(leave, t1);
+        if (enter > leave)
+            return false;
+    }
+    return true;
+}
+
+bool segmentHitsSphere(const Vec3& a, const Vec3& b, const Vec3& centre, double radius) {
+    const Vec3 d = b - a;
+    const double t = std::clamp((centre - a).dot(d) / d.squaredNorm(), 0.0, 1.0);
+    return (a + t * d - centre).squaredNorm() < radius * radius;
+}
+
+} // namespace
+
+World::World(Scene scene, std::uint64_t seed)
+    : scene_(std::move(scene))
+    , rig_(makeRig(scene_.rig))
+    , seed_(seed) {
+    Random random(mix(seed, 0x5EED));
+    const double w = scene_.rig.width_px, h = scene_.rig.height_px;
+    for (int camera = 0; camera < 2; ++camera) {
+        for (int i = 0; i < scene_.spurious.staticPerCamera; ++i) {
+            Glint g;
+            g.centre_px = {random.uniform(10.0, w - 10.0), random.uniform(10.0, h - 10.0)};
+            if (i % 3 == 2) { // a streak: a lit edge of a table or a cable
+                g.radiusMajor_px = random.uniform(6.0, 15.0);
+                g.radiusMinor_px = random.uniform(1.2, 2.0);
+                g.angle_rad = random.uniform(0.0, std::numbers::pi);
+            } else {
+                g.radiusMajor_px = g.radiusMinor_px = random.uniform(1.5, 4.0);
+            }
+            g.peak_dn = random.uniform(300.0, 800.0);
+            staticGlints_[static_cast<std::size_t>(camera)].push_back(g);
+        }
+        for (int i = 0; i < scene_.spurious.flickeringPerCamera; ++i) {
+            Glint g;
+            g.centre_px = {random.uniform(10.0, w - 10.0), random.uniform(10.0, h - 10.0)};
+            g.radiusMajor_px = g.radiusMinor_px = random.uniform(1.5, 3.5);
+            g.peak_dn = random.uniform(250.0, 700.0);
+            flickerGlints_[static_cast<std::size_t>(camera)].push_back(g);
+        }
+    }
+    const double midline = 0.5 * scene_.rig.baseline_mm;
+    for (int i = 0; i < scene_.spurious.points3d; ++i)
+        spuriousPoints_rig_mm_.emplace_back(random.uniform(midline - 220.0, midline + 220.0),
+                                            random.uniform(-160.0, 160.0),
+                                            random.uniform(420.0, 760.0));
+    occluderScratch_.reserve(scene_.occluders.size());
+}
+
+bool World::markerVisible(const Vec3& position_rig_mm, const Vec3& normal_rig, int camera,
+                          int ownObject, const std::vector<RigidTransform>& poses,
+                          const std::vector<Vec3>& occluderCentres) const {
+    const Vec3 eye = rig_.camera(camera).centre_rig_mm();
+    const Vec3 toEye = eye - position_rig_mm;
+    const bool hasNormal = normal_rig.squaredNorm() > 0.5;
+    if (hasNormal && normal_rig.dot(toEye) < kMinFacingCosine * toEye.norm())
+        return false;
+
+    for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+        const MarkerObject& object = scene_.objects[o].object;
+        const RigidTransform toObject = poses[o].inverse();
+        // A marker sits on its own body's surface: start just outside it along the normal.
+        Vec3 start = position_rig_mm;
+        if (static_cast<int>(o) == ownObject) {
+            if (!hasNormal)
+                continue;
+            start += 0.6 * normal_rig;
+        }
+        const Vec3 a = toObject.apply(start);
+        const Vec3 b = toObject.apply(eye);
+        for (const BodyBox& box : object.bodyBoxes)
+            if (segmentHitsBox(a, b, box.centre_object_mm, box.halfExtent_mm))
+                return false;
+        if (object.bodyRadius_mm > 0.0 &&
+            segmentHitsSphere(a, b, Vec3::Zero(), object.bodyRadius_mm))
+            return false;
+    }
+    for (std::size_t i = 0; i < occluderCentres.size(); ++i)
+        if (segmentHitsSphere(position_rig_mm, eye, occluderCentres[i],
+                              scene_.occluders[i].radius_mm))
+            return false;
+    return true;
+}
+
+void World::fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, int ownObject,
+                     const std::vector<RigidTransform>& poses,
+                     const std::vector<Vec3>& occluderCentres) const {
+    for (int camera = 0; camera < 2; ++camera) {
+        const auto c = static_cast<std::size_t>(camera);
+        view.visible[c] = false;
+        const CameraModel& model = rig_.camera(camera);
+        const std::optional<Vec2> pixel = model.project(view.position_rig_mm);
+        if (!pixel)
+            continue;
+        const CameraIntrinsics& in = model.intrinsics();
+        if (pixel->x() < 0.0 || pixel->y() < 0.0 || pixel->x() > in.width_px - 1.0 ||
+            pixel->y() > in.height_px - 1.0)
+            continue;
+        if (!markerVisible(view.position_rig_mm, normal_rig, camera, ownObject, poses,
+                           occluderCentres))
+            continue;
+        const Vec3 inCamera = model.toCamera(view.position_rig_mm);
+        const double distance_mm = inCamera.norm();
+        double facing = 1.0;
+        if (normal_rig.squaredNorm() > 0.5) {
+            const Vec3 toEye = (model.centre_rig_mm() - view.position_rig_mm).normalized();
+            facing = 0.35 + 0.65 * normal_rig.dot(toEye);
+        }
+        const double falloff = (kReferenceDistance_mm / distance_mm);
+        view.visible[c] = true;
+        view.pixel[c] = *pixel;
+        view.radius_px[c] = in.fx_px * 0.5 * diameter_mm / inCamera.z();
+        view.peak_dn[c] = kPeakAtReference_dn * falloff * falloff * facing;
+    }
+}
+
+void World::observe(std::uint64_t frameIndex, Observation& out) const {
+    const double t = frameTime_s(frameIndex);
+    out.time_s = t;
+    // Room for the largest frame at once, so observing allocates only the first time.
+    std::size_t markerCount = 0;
+    for (const SceneObject& object : scene_.objects)
+        markerCount += object.object.markers.size();
+    out.objectPoses.reserve(scene_.objects.size());
+    out.markers.reserve(markerCount);
+    out.spuriousPoints.reserve(spuriousPoints_rig_mm_.size());
+    for (std::size_t camera = 0; camera < 2; ++camera)
+        out.glints[camera].reserve(staticGlints_[camera].size() + flickerGlints_[camera].size());
+    out.objectPoses.clear();
+    for (const SceneObject& object : scene_.objects)
+        out.objectPoses.push_back(object.motion.poseAt(t));
+    occluderScratch_.clear();
+    for (const Occluder& occluder : scene_.occluders)
+        occluderScratch_.push_back(occluder.motion.poseAt(t).translation_mm);
+
+    out.markers.clear();
+    for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
+        const MarkerObject& object = scene_.objects[o].object;
+        const RigidTransform& pose = out.objectPoses[o];
+        for (std::size_t m = 0; m < object.markers.size(); ++m) {
+            MarkerView view;
+            view.object = static_cast<int>(o);
+            view.marker = static_cast<int>(m);
+            view.position_rig_mm = pose.apply(object.markers[m].position_object_mm);
+            const Vec3 normal_rig = pose.rotation * object.markers[m].normal_object;
+            fillView(view, normal_rig, object.markerDiameter_mm, static_cast<int>(o),
+                     out.objectPoses, occluderScratch_);
+            out.markers.push_back(view);
+        }
+    }
+
+    Random flicker(mix(seed_, frameIndex + 1));
+    out.spuriousPoints.clear();
+    for (std::size_t i = 0; i < spuriousPoints_rig_mm_.size(); ++i) {
+        if (!flicker.chance(kSpuriousPointLitProbability))
+            continue;
+        MarkerView view;
+        view.object = -1;
+        view.marker = static_cast<int>(i);
+        view.position_rig_mm = spuriousPoints_rig_mm_[i];
+        fillView(view, Vec3::Zero(), kSpuriousPointDiameter_mm, -1, out.objectPoses,
+                 occluderScratch_);
+        for (double& peak : view.peak_dn)
+            peak *= 0.6;
+        out.spuriousPoints.push_back(view);
+    }
+    for (std::size_t camera = 0; camera < 2; ++camera) {
+        out.glints[camera].clear();
+        for (const Glint& g : staticGlints_[camera])
+            out.glints[camera].push_back(g);
+        for (const Glint& g : flickerGlints_[camera])
+            if (flicker.chance(scene_.spurious.flickerProbability))
+                out.glints[camera].push_back(g);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+
+FrameRenderer::FrameRenderer(int width_px, int height_px, double background_dn,
+                             double noiseSigma_dn, std::uint64_t seed)
+    : width_px_(width_px)
+    , height_px_(height_px)
+    , seed_(seed) {
+    constexpr std::size_t kTableExtra = 1u << 16;
+    noiseTable_.resize(static_cast<std::size_t>(width_px) + kTableExtra);
+    Random random(mix(seed, 0x401CE));
+    for (std::uint8_t& value : noiseTable_)
+        value = static_cast<std::uint8_t>(
+            std::clamp(std::lround(background_dn + random.normal(noiseSigma_dn)), 0l, 255l));
+}
+
+void FrameRenderer::drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
+                             double radiusMajor_px, double radiusMinor_px, double angle_rad,
+                             double peak_dn) const {
+    if (peak_dn <= 0.5)
+        return;
+    const double reach = radiusMajor_px + 4.0 * kEdgeBlur_px + 1.0;
+    const int x0 = std::max(0, static_cast<int>(std::floor(centre_px.x() - reach)));
+    const int x1 = std::min(width_px_ - 1, static_cast<int>(std::ceil(centre_px.x() + reach)));
+    const int y0 = std::max(0, static_cast<int>(std::floor(centre_px.y() - reach)));
+    const int y1 = std::min(height_px_ - 1, static_cast<int>(std::ceil(centre_px.y() + reach)));
+    const double c = std::cos(angle_rad), s = std::sin(angle_rad);
+    const double squeeze = radiusMinor_px / radiusMajor_px;
+    const double edgeScale = 1.0 / (std::numbers::sqrt2 * kEdgeBlur_px);
+    for (int y = y0; y <= y1; ++y) {
+        std::uint8_t* row = image.data() + static_cast<std::ptrdiff_t>(y) * stride_bytes;
+        for (int x = x0; x <= x1; ++x) {
+            const double dx = x - centre_px.x(), dy = y - centre_px.y();
+            const double along = (dx * c + dy * s) * squeeze;
+            const double across = -dx * s + dy * c;
+            const double rho = std::sqrt(along * along + across * across);
+            const double value = peak_dn * 0.5 * std::erfc((rho - radiusMinor_px) * edgeScale);
+            const double sum = row[x] + value + 0.5;
+            row[x] = static_cast<std::uint8_t>(sum >= 255.0 ? 255.0 : sum);
+        }
+    }
+}
+
+void FrameRenderer::render(std::span<std::uint8_t> image, int stride_bytes, int camera,
+                           const Observation& observation, double ledLitFraction,
+                           std::uint64_t frameIndex) const {
+    Random random(mix(seed_, frameIndex * 2 + static_cast<std::uint64_t>(camera) + 7));
+    const std::size_t width = static_cast<std::size_t>(width_px_);
+    const std::uint64_t offsets = noiseTable_.size() - width;
+    for (int y = 0; y < height_px_; ++y)
+        std::memcpy(image.data() + static_cast<std::ptrdiff_t>(y) * stride_bytes,
+                    noiseTable_.data() + random.below(offsets), width);
+
+    const auto c = static_cast<std::size_t>(camera);
+    const double lit = std::clamp(ledLitFraction, 0.0, 1.0);
+    for (const MarkerView& m : observation.markers)
+        if (m.visible[c])
+            drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,
+                     m.peak_dn[c] * lit);
+    for (const MarkerView& m : observation.spuriousPoints)
+        if (m.visible[c])
+            drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,
+                     m.peak_dn[c]);
+    for (const Glint& g : observation.glints[c])
+        drawSpot(image, stride_bytes, g.centre_px, g.radiusMajor_px, g.radiusMinor_px, g.angle_rad,
+                 g.peak_dn);
+}
+
+} // namespace edgetrack::sim

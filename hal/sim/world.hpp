@@ -1,0 +1,127 @@
+// What the simulated cameras see: marker visibility, occlusion, spurious reflections, images.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/stereo_rig.hpp"
+#include "hal/sim/scene.hpp"
+
+namespace edgetrack::sim {
+
+/// \brief One marker of one object as both cameras see it at one instant (ground truth).
+struct MarkerView {
+    int object = 0;
+    int marker = 0;
+    Vec3 position_rig_mm = Vec3::Zero();
+    /// In the image, facing the camera and not hidden by any body or hand.
+    std::array<bool, 2> visible{};
+    std::array<Vec2, 2> pixel{Vec2::Zero(), Vec2::Zero()};
+    std::array<double, 2> radius_px{};
+    /// Peak brightness with the LED ring lit for the whole exposure (DN; above 255 saturates).
+    std::array<double, 2> peak_dn{};
+};
+
+/// \brief An image-space reflection of ambient IR in one camera; not lit by the LED ring.
+struct Glint {
+    Vec2 centre_px = Vec2::Zero();
+    double radiusMajor_px = 2.0;
+    double radiusMinor_px = 2.0;
+    double angle_rad = 0.0;
+    double peak_dn = 400.0;
+
+    bool isRound() const { return radiusMajor_px <= 1.3 * radiusMinor_px; }
+};
+
+/// \brief The world at one instant, from the cameras' point of view.
+struct Observation {
+    double time_s = 0.0;
+    /// T_rig_from_object for each scene object, in scene order.
+    std::vector<RigidTransform> objectPoses;
+    std::vector<MarkerView> markers;
+    /// Reflective points in the volume that are lit this frame (ambient, both cameras).
+    std::vector<MarkerView> spuriousPoints;
+    std::array<std::vector<Glint>, 2> glints;
+};
+
+/**
+ * \brief The simulated world: a scene, its rig, and everything random drawn from one seed.
+ *
+ * observe() is a pure function of (seed, frame index), so frames can be produced in any order and
+ * twice give the same result. Vectors in the Observation are reused, so after the first frames
+ * observing allocates nothing.
+ */
+class World {
+public:
+    World(Scene scene, std::uint64_t seed);
+
+    const Scene& scene() const { return scene_; }
+    const StereoRig& rig() const { return rig_; }
+    std::uint64_t seed() const { return seed_; }
+
+    /// \return time (s) of frame \a frameIndex's mid-exposure.
+    double frameTime_s(std::uint64_t frameIndex) const {
+        return static_cast<double>(frameIndex) / scene_.frameRate_hz;
+    }
+
+    /// \brief Fill \a out with the world as seen at frame \a frameIndex.
+    void observe(std::uint64_t frameIndex, Observation& out) const;
+
+    /// \brief Marker visibility from camera \a camera (facing it and not hidden); exposed for
+    /// tests.
+    bool markerVisible(const Vec3& position_rig_mm, const Vec3& normal_rig, int camera,
+                       int ownObject, const std::vector<RigidTransform>& poses,
+                       const std::vector<Vec3>& occluderCentres) const;
+
+private:
+    void fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, int ownObject,
+                  const std::vector<RigidTransform>& poses,
+                  const std::vector<Vec3>& occluderCentres) const;
+
+    Scene scene_;
+    StereoRig rig_;
+    std::uint64_t seed_;
+    std::array<std::vector<Glint>, 2> staticGlints_;
+    std::array<std::vector<Glint>, 2> flickerGlints_;
+    std::vector<Vec3> spuriousPoints_rig_mm_;
+    mutable std::vector<Vec3> occluderScratch_;
+};
+
+/**
+ * \brief Renders 8-bit IR frames: background, sensor noise, blurred saturating marker discs.
+ *
+ * Noise comes from a table made once, copied per row from a random offset, so a frame costs
+ * little more than a memory fill. Overlapping discs add up and merge into one blob.
+ */
+class FrameRenderer {
+public:
+    FrameRenderer(int width_px, int height_px, double background_dn, double noiseSigma_dn,
+                  std::uint64_t seed);
+
+    /**
+     * \brief Render camera \a camera's image of \a observation into \a image (row stride
+     * \a stride_bytes).
+     * \param ledLitFraction share of the exposure during which the LED ring was on (0 to 1);
+     * markers reflect the ring, glints do not.
+     */
+    void render(std::span<std::uint8_t> image, int stride_bytes, int camera,
+                const Observation& observation, double ledLitFraction,
+                std::uint64_t frameIndex) const;
+
+    /// \brief Blur of every disc edge (px, Gaussian sigma).
+    static constexpr double kEdgeBlur_px = 0.6;
+
+private:
+    void drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
+                  double radiusMajor_px, double radiusMinor_px, double angle_rad,
+                  double peak_dn) const;
+
+    int width_px_;
+    int height_px_;
+    std::uint64_t seed_;
+    std::vector<std::uint8_t> noiseTable_;
+};
+
+} // namespace edgetrack::sim
