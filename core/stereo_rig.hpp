@@ -48,9 +48,10 @@ public:
     /// \brief Rectified coordinates of a point of the rig frame as seen from camera \a cameraIndex.
     std::optional<Vec2> rectifyPoint(int cameraIndex, const Vec3& point_rig_mm) const;
 
-private:
+    /// \brief Rectified coordinates of a viewing direction (rig frame), e.g. a blob's ray.
     std::optional<Vec2> rectifyDirection(const Vec3& direction_rig) const;
 
+private:
     std::array<CameraModel, 2> cameras_{};
     Mat3 rotation_rect_from_rig_ = Mat3::Identity();
     double rectifiedFocal_px_ = 1.0;

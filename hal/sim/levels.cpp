@@ -1,6 +1,8 @@
 // Blob-level and point-level views of an observation, as a perfect detector would report them.
 #include "hal/sim/levels.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <numbers>
 
 namespace edgetrack::sim {
@@ -11,9 +13,25 @@ struct Spot {
     Vec2 centre_px;
     double radius_px;
     int group;
-    /// Index into markers followed by spuriousPoints; -1 for a glint.
+    /// Index into markers followed by spuriousPoints; -1 for a round glint, -2 for a streak.
     int source;
+    /// How far from the centre the spot stays above the detection level (px).
+    double reach_px;
 };
+
+// Distance from a spot's centre at which its blurred edge falls to the detection level, from the
+// renderer's profile peak * erfc((rho - R) / (sqrt(2) sigma)) / 2.
+double reachAtDetectionLevel(double radius_px, double peak_dn) {
+    const double target = 2.0 * kDetectionLevel_dn / peak_dn;
+    if (target >= 2.0)
+        return 0.0;                // never reaches the level: no blob at all
+    double low = -6.0, high = 6.0; // erfc is decreasing: bisect for erfc(z) = target
+    for (int i = 0; i < 50; ++i) {
+        const double mid = 0.5 * (low + high);
+        (std::erfc(mid) > target ? low : high) = mid;
+    }
+    return std::max(0.0, radius_px + std::numbers::sqrt2 * FrameRenderer::kEdgeBlur_px * low);
+}
 
 // Spots whose discs touch (with the edge blur) form one blob; returns spots with group labels.
 void groupSpots(const Observation& observation, int camera, std::vector<Spot>& spots) {
@@ -22,26 +40,32 @@ void groupSpots(const Observation& observation, int camera, std::vector<Spot>& s
     int source = 0;
     for (const MarkerView& m : observation.markers) {
         if (m.visible[c])
-            spots.push_back({m.pixel[c], m.radius_px[c], -1, source});
+            spots.push_back({m.pixel[c], m.radius_px[c], -1, source,
+                             reachAtDetectionLevel(m.radius_px[c], m.peak_dn[c])});
         ++source;
     }
     for (const MarkerView& m : observation.spuriousPoints) {
         if (m.visible[c])
-            spots.push_back({m.pixel[c], m.radius_px[c], -1, source});
+            spots.push_back({m.pixel[c], m.radius_px[c], -1, source,
+                             reachAtDetectionLevel(m.radius_px[c], m.peak_dn[c])});
         ++source;
     }
     // Every glint takes part in merging (a streak across a marker spoils it too), but only round
     // ones are reported as blobs.
-    for (const Glint& g : observation.glints[c])
-        spots.push_back({g.centre_px, g.isRound() ? g.radiusMinor_px : g.radiusMajor_px, -1,
-                         g.isRound() ? -1 : -2});
+    for (const Glint& g : observation.glints[c]) {
+        const double radius = g.isRound() ? g.radiusMinor_px : g.radiusMajor_px;
+        spots.push_back({g.centre_px, radius, -1, g.isRound() ? -1 : -2,
+                         reachAtDetectionLevel(radius, g.peak_dn)});
+    }
+    // Spots too faint to reach the detection level make no blob.
+    std::erase_if(spots, [](const Spot& s) { return s.reach_px <= 0.0; });
 
-    const double blurMargin_px = 2.0 * FrameRenderer::kEdgeBlur_px;
     for (std::size_t i = 0; i < spots.size(); ++i) {
         if (spots[i].group < 0)
             spots[i].group = static_cast<int>(i);
         for (std::size_t j = i + 1; j < spots.size(); ++j) {
-            const double reach = spots[i].radius_px + spots[j].radius_px + blurMargin_px;
+            // Pixels of 8-connected blobs touch up to one pixel diagonal beyond their reaches.
+            const double reach = spots[i].reach_px + spots[j].reach_px + std::numbers::sqrt2;
             if ((spots[i].centre_px - spots[j].centre_px).norm() >= reach)
                 continue;
             // Union: relabel j's whole group to i's.
@@ -88,8 +112,7 @@ void blobsFromObservation(const Observation& observation, int camera, const Leve
     }
 }
 
-void pointsFromObservation(const Observation& observation, const LevelNoise& noise, Random& random,
-                           std::vector<Vec3>& out) {
+void separatelyVisible(const Observation& observation, std::vector<int>& out) {
     thread_local std::array<std::vector<Spot>, 2> spots;
     thread_local std::array<std::vector<int>, 2> groupSize;
     thread_local std::array<std::vector<int>, 2> groupOfSource;
@@ -105,24 +128,33 @@ void pointsFromObservation(const Observation& observation, const LevelNoise& noi
                 groupOfSource[c][static_cast<std::size_t>(s.source)] = s.group;
         }
     }
-
     out.clear();
-    std::size_t source = 0;
-    auto consider = [&](const MarkerView& m) {
-        const std::size_t i = source++;
+    for (std::size_t i = 0; i < sources; ++i) {
+        bool alone = true;
         for (std::size_t c = 0; c < 2; ++c) {
             const int group = groupOfSource[c][i];
-            if (group < 0 || groupSize[c][static_cast<std::size_t>(group)] != 1)
-                return; // unseen, or merged with another spot in this camera
+            alone = alone && group >= 0 && groupSize[c][static_cast<std::size_t>(group)] == 1;
         }
-        out.push_back(m.position_rig_mm + Vec3(random.normal(noise.pointSigma_mm),
-                                               random.normal(noise.pointSigma_mm),
-                                               random.normal(noise.pointSigma_mm)));
-    };
-    for (const MarkerView& m : observation.markers)
-        consider(m);
-    for (const MarkerView& m : observation.spuriousPoints)
-        consider(m);
+        if (alone)
+            out.push_back(static_cast<int>(i));
+    }
+}
+
+void pointsFromObservation(const Observation& observation, const LevelNoise& noise, Random& random,
+                           std::vector<Vec3>& out) {
+    thread_local std::vector<int> visible;
+    separatelyVisible(observation, visible);
+    out.clear();
+    const std::size_t markerCount = observation.markers.size();
+    for (const int source : visible) {
+        const auto s = static_cast<std::size_t>(source);
+        const Vec3& p = s < markerCount
+                            ? observation.markers[s].position_rig_mm
+                            : observation.spuriousPoints[s - markerCount].position_rig_mm;
+        out.push_back(p + Vec3(random.normal(noise.pointSigma_mm),
+                               random.normal(noise.pointSigma_mm),
+                               random.normal(noise.pointSigma_mm)));
+    }
     // INTERFACES §1: points come in any order; shuffling keeps consumers honest.
     for (std::size_t i = out.size(); i > 1; --i)
         std::swap(out[i - 1], out[random.below(i)]);

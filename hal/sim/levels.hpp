@@ -15,6 +15,10 @@ struct SimBlob {
     double area_px = 0.0;
 };
 
+/// \brief Level (DN) at which the blob and point levels consider a spot detected; it matches the
+/// default threshold of core's BlobDetector, so "merged" means what the detector will see merged.
+inline constexpr double kDetectionLevel_dn = 60.0;
+
 /// \brief Noise of the blob and point levels.
 struct LevelNoise {
     double blobCentreSigma_px = 0.05;
@@ -28,6 +32,12 @@ struct LevelNoise {
  */
 void blobsFromObservation(const Observation& observation, int camera, const LevelNoise& noise,
                           Random& random, std::vector<SimBlob>& out);
+
+/**
+ * \brief Indices (markers first, then spuriousPoints after them) of the points that both cameras
+ * see as blobs of their own, merged with no other spot in either image: what stereo can find.
+ */
+void separatelyVisible(const Observation& observation, std::vector<int>& out);
 
 /**
  * \brief The 3D points a perfect stereo stage would reconstruct: markers and spurious points seen

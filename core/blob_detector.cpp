@@ -1,0 +1,261 @@
+// Blob detection in 8-bit IR frames: NEON threshold scan, run-based connected components, moments.
+#include "core/blob_detector.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/simd/neon.hpp"
+
+namespace edgetrack {
+
+namespace {
+// Labels and run indices are ints (they can be -1); storage is indexed by size_t.
+constexpr std::size_t idx(int i) {
+    return static_cast<std::size_t>(i);
+}
+} // namespace
+
+// Sums over a component's pixels; exact integers, so merging components loses nothing.
+struct BlobDetector::Moments {
+    std::int64_t count = 0;
+    std::int64_t sumI = 0, sumIx = 0, sumIy = 0;
+    std::int64_t sumX = 0, sumY = 0, sumXX = 0, sumYY = 0, sumXY = 0;
+    int left = 0, right = 0, top = 0, bottom = 0;
+    int peak = 0;
+
+    void add(const Moments& o) {
+        count += o.count;
+        sumI += o.sumI;
+        sumIx += o.sumIx;
+        sumIy += o.sumIy;
+        sumX += o.sumX;
+        sumY += o.sumY;
+        sumXX += o.sumXX;
+        sumYY += o.sumYY;
+        sumXY += o.sumXY;
+        left = std::min(left, o.left);
+        right = std::max(right, o.right);
+        top = std::min(top, o.top);
+        bottom = std::max(bottom, o.bottom);
+        peak = std::max(peak, o.peak);
+    }
+};
+
+struct BlobDetector::Run {
+    int x0 = 0;
+    int x1 = 0;
+    int label = -1;
+};
+
+BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int height_px)
+    : config_(config)
+    , width_(width_px)
+    , height_(height_px) {
+    valid_ = width_px > 0 && height_px > 0 && width_px <= 65535 && height_px <= 65535 &&
+             config.maxLabels > 0 && config.maxLabels < (1u << 30) && config.minArea_px >= 1 &&
+             config.maxArea_px >= config.minArea_px && config.threshold > 0;
+    if (!valid_)
+        return;
+    moments_ = std::make_unique<Moments[]>(config.maxLabels);
+    parent_ = std::make_unique<int[]>(config.maxLabels);
+    // At most one run per two pixels of a row.
+    const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
+    previousRuns_ = std::make_unique<Run[]>(runsPerRow);
+    currentRuns_ = std::make_unique<Run[]>(runsPerRow);
+}
+
+BlobDetector::~BlobDetector() = default;
+
+int BlobDetector::newLabel() {
+    if (static_cast<std::size_t>(labelCount_) >= config_.maxLabels) {
+        labelsExhausted_ = true;
+        return -1;
+    }
+    parent_[idx(labelCount_)] = labelCount_;
+    moments_[idx(labelCount_)] = Moments{};
+    return labelCount_++;
+}
+
+int BlobDetector::findRoot(int label) {
+    while (parent_[idx(label)] != label) {
+        parent_[idx(label)] = parent_[idx(parent_[idx(label)])]; // path halving
+        label = parent_[idx(label)];
+    }
+    return label;
+}
+
+int BlobDetector::unite(int a, int b) {
+    const int ra = findRoot(a), rb = findRoot(b);
+    if (ra == rb)
+        return ra;
+    const int keep = std::min(ra, rb), gone = std::max(ra, rb);
+    moments_[idx(keep)].add(moments_[idx(gone)]);
+    parent_[idx(gone)] = keep;
+    return keep;
+}
+
+void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
+    Moments m;
+    std::int64_t sumI = 0, sumIx = 0, sumX = 0, sumXX = 0;
+    int peak = 0;
+    for (int x = x0; x <= x1; ++x) {
+        const int intensity = row[x];
+        sumI += intensity;
+        sumIx += static_cast<std::int64_t>(intensity) * x;
+        sumX += x;
+        sumXX += static_cast<std::int64_t>(x) * x;
+        peak = std::max(peak, intensity);
+    }
+    const std::int64_t count = x1 - x0 + 1;
+    m.count = count;
+    m.sumI = sumI;
+    m.sumIx = sumIx;
+    m.sumIy = sumI * y;
+    m.sumX = sumX;
+    m.sumY = count * y;
+    m.sumXX = sumXX;
+    m.sumYY = count * y * y;
+    m.sumXY = sumX * y;
+    m.left = x0;
+    m.right = x1;
+    m.top = m.bottom = y;
+    m.peak = peak;
+
+    // 8-connectivity: a previous run touches this one if their x ranges overlap when widened by 1.
+    int label = -1;
+    for (int i = 0; i < previousCount_; ++i) {
+        const Run& p = previousRuns_[idx(i)];
+        if (p.x1 < x0 - 1)
+            continue;
+        if (p.x0 > x1 + 1)
+            break;
+        if (p.label < 0)
+            continue;
+        label = label < 0 ? findRoot(p.label) : unite(label, p.label);
+    }
+    if (label < 0)
+        label = newLabel();
+    if (label >= 0)
+        moments_[idx(label)].add(m);
+    currentRuns_[idx(currentCount_++)] = {x0, x1, label};
+}
+
+void BlobDetector::finishRow() {
+    std::swap(previousRuns_, currentRuns_);
+    previousCount_ = currentCount_;
+    currentCount_ = 0;
+}
+
+void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
+                          BoundedVectorView<Blob>& out) {
+    out.clear();
+    ++counters_.images;
+    if (!valid_)
+        return;
+    labelCount_ = 0;
+    labelsExhausted_ = false;
+    previousCount_ = 0;
+    currentCount_ = 0;
+
+    const std::uint8_t threshold = config_.threshold;
+    for (int y = 0; y < height_; ++y) {
+        const std::uint8_t* row = pixels + static_cast<std::ptrdiff_t>(y) * stride_bytes;
+        int runStart = -1;
+        int x = 0;
+        auto scalarPixel = [&](int at) {
+            if (row[at] >= threshold) {
+                if (runStart < 0)
+                    runStart = at;
+            } else if (runStart >= 0) {
+                closeRun(y, runStart, at - 1, row);
+                runStart = -1;
+            }
+        };
+        // Dark stretches (nearly all of an IR frame) are skipped 64 bytes at a time: one load per
+        // byte and one horizontal maximum per 64.
+        while (x + 64 <= width_) {
+            const uint8x16_t a = vld1q_u8(row + x);
+            const uint8x16_t b = vld1q_u8(row + x + 16);
+            const uint8x16_t c = vld1q_u8(row + x + 32);
+            const uint8x16_t d = vld1q_u8(row + x + 48);
+            const uint8x16_t maximum = vmaxq_u8(vmaxq_u8(a, b), vmaxq_u8(c, d));
+            if (vmaxvq_u8(maximum) < threshold) {
+                if (runStart >= 0) {
+                    closeRun(y, runStart, x - 1, row);
+                    runStart = -1;
+                }
+                x += 64;
+                continue;
+            }
+            const uint8x16_t minimum = vminq_u8(vminq_u8(a, b), vminq_u8(c, d));
+            if (vminvq_u8(minimum) >= threshold) {
+                if (runStart < 0)
+                    runStart = x;
+                x += 64;
+                continue;
+            }
+            for (const int end = x + 64; x < end; ++x)
+                scalarPixel(x);
+        }
+        for (; x < width_; ++x)
+            scalarPixel(x);
+        if (runStart >= 0)
+            closeRun(y, runStart, width_ - 1, row);
+        finishRow();
+    }
+    if (labelsExhausted_)
+        ++counters_.labelOverflow;
+    emitBlobs(out);
+}
+
+void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out) {
+    for (int label = 0; label < labelCount_; ++label) {
+        if (parent_[idx(label)] != label)
+            continue;
+        const Moments& m = moments_[idx(label)];
+        if (m.count < config_.minArea_px) {
+            ++counters_.rejectedSmall;
+            continue;
+        }
+        if (m.count > config_.maxArea_px) {
+            ++counters_.rejectedLarge;
+            continue;
+        }
+        // Shape from the pixel distribution (unweighted: the saturated core carries no shape);
+        // +1/12 is each pixel's own extent.
+        const double n = static_cast<double>(m.count);
+        const double meanX = static_cast<double>(m.sumX) / n;
+        const double meanY = static_cast<double>(m.sumY) / n;
+        const double xx = static_cast<double>(m.sumXX) / n - meanX * meanX + 1.0 / 12.0;
+        const double yy = static_cast<double>(m.sumYY) / n - meanY * meanY + 1.0 / 12.0;
+        const double xy = static_cast<double>(m.sumXY) / n - meanX * meanY;
+        const double half = 0.5 * (xx + yy);
+        const double spread = std::sqrt(0.25 * (xx - yy) * (xx - yy) + xy * xy);
+        const double major = half + spread, minor = std::max(half - spread, 1e-9);
+        const double elongation = std::sqrt(major / minor);
+        // A uniform ellipse with these moments covers 4 pi sqrt(major * minor) pixels.
+        const double fill = n / (4.0 * 3.14159265358979323846 * std::sqrt(major * minor));
+        if (elongation > config_.maxElongation || fill < config_.minFill) {
+            ++counters_.rejectedNotRound;
+            continue;
+        }
+        Blob* blob = out.append();
+        if (blob == nullptr) {
+            ++counters_.blobOverflow;
+            continue;
+        }
+        const double weight = static_cast<double>(m.sumI);
+        blob->centre_px = {static_cast<double>(m.sumIx) / weight,
+                           static_cast<double>(m.sumIy) / weight};
+        blob->area_px = static_cast<float>(n);
+        blob->elongation = static_cast<float>(elongation);
+        blob->left = static_cast<std::uint16_t>(m.left);
+        blob->right = static_cast<std::uint16_t>(m.right);
+        blob->top = static_cast<std::uint16_t>(m.top);
+        blob->bottom = static_cast<std::uint16_t>(m.bottom);
+        blob->peak = static_cast<std::uint8_t>(m.peak);
+        ++counters_.accepted;
+    }
+}
+
+} // namespace edgetrack

@@ -1,0 +1,109 @@
+// Blob detection in 8-bit IR frames: NEON threshold scan, run-based connected components, moments.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include "core/bounded_vector.hpp"
+#include "core/geometry.hpp"
+
+namespace edgetrack {
+
+/// \brief Thresholds of the blob detector; defaults suit the simulated desktop rig.
+struct BlobDetectorConfig {
+    /// Pixels at or above this level (DN) belong to blobs. Background is ~10 DN, markers saturate.
+    std::uint8_t threshold = 60;
+    /// Blobs with fewer pixels are noise or specks (a 6 mm marker at 1 m is ~25 px).
+    int minArea_px = 6;
+    /// Blobs with more pixels are lamps or large reflections, not markers.
+    int maxArea_px = 3000;
+    /// Largest ratio of the blob's principal axes; two touching markers measure 1.4 to 2.2.
+    double maxElongation = 1.35;
+    /// Smallest share of the moment ellipse that the blob fills; merged markers leave gaps.
+    double minFill = 0.75;
+    /// Blobs kept per image; more are counted as overflow.
+    std::size_t maxBlobs = 256;
+    /// Connected-component labels per image; a flood of specks beyond this is counted, not stored.
+    std::size_t maxLabels = 4096;
+};
+
+/// \brief A detected blob: centre in raw pixels of its camera, with (0, 0) the top-left pixel.
+struct Blob {
+    /// Intensity-weighted centre (px).
+    Vec2 centre_px = Vec2::Zero();
+    /// Number of pixels at or above the threshold.
+    float area_px = 0.0f;
+    /// Ratio of principal axes of the pixel distribution (1 for a disc).
+    float elongation = 1.0f;
+    std::uint16_t left = 0, top = 0, right = 0, bottom = 0;
+    std::uint8_t peak = 0;
+};
+
+/// \brief Per-detector counters for the status view (cumulative).
+struct BlobCounters {
+    std::uint64_t images = 0;
+    std::uint64_t accepted = 0;
+    std::uint64_t rejectedSmall = 0;
+    std::uint64_t rejectedLarge = 0;
+    std::uint64_t rejectedNotRound = 0;
+    std::uint64_t blobOverflow = 0;
+    std::uint64_t labelOverflow = 0;
+};
+
+/**
+ * \brief Finds bright round blobs in one camera's images.
+ *
+ * One pass over the image: NEON compares 16 pixels at a time with the threshold and skips dark
+ * stretches, which is nearly all of an IR frame; bright stretches become runs, runs that touch
+ * (8-connected) join through union-find, and each component accumulates its moments as it grows.
+ * All storage is sized in the constructor from the configuration and the image width.
+ */
+class BlobDetector {
+public:
+    BlobDetector(const BlobDetectorConfig& config, int width_px, int height_px);
+    ~BlobDetector();
+    BlobDetector(const BlobDetector&) = delete;
+    BlobDetector& operator=(const BlobDetector&) = delete;
+
+    bool isValid() const { return valid_; }
+
+    /**
+     * \brief Detect the blobs of one image.
+     * \param pixels first row; rows are \a stride_bytes apart and width_px wide.
+     * \param out cleared, then filled with accepted blobs in the order their top rows appear.
+     */
+    void detect(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out);
+
+    const BlobCounters& counters() const { return counters_; }
+    const BlobDetectorConfig& config() const { return config_; }
+
+private:
+    struct Moments;
+    struct Run;
+
+    int newLabel();
+    int findRoot(int label);
+    int unite(int a, int b);
+    void closeRun(int y, int x0, int x1, const std::uint8_t* row);
+    void finishRow();
+    void emitBlobs(BoundedVectorView<Blob>& out);
+
+    BlobDetectorConfig config_;
+    int width_;
+    int height_;
+    bool valid_ = false;
+    BlobCounters counters_{};
+
+    std::unique_ptr<Moments[]> moments_;
+    std::unique_ptr<int[]> parent_;
+    int labelCount_ = 0;
+    bool labelsExhausted_ = false;
+
+    std::unique_ptr<Run[]> previousRuns_;
+    std::unique_ptr<Run[]> currentRuns_;
+    int previousCount_ = 0;
+    int currentCount_ = 0;
+};
+
+} // namespace edgetrack

@@ -1,0 +1,104 @@
+// Scott and Longuet-Higgins correspondence (SVD of a proximity matrix), solved per independent
+// block.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include <Eigen/Core>
+#include <Eigen/SVD>
+
+namespace edgetrack {
+
+/// \brief Largest block the SVD solves; bigger blocks fall back to mutual-best pairing (counted).
+inline constexpr int kMaxCorrespondenceBlock = 48;
+
+/// \brief A proximity block with a fixed maximum size: Eigen never allocates it on the heap.
+using ProximityBlock = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor,
+                                     kMaxCorrespondenceBlock, kMaxCorrespondenceBlock>;
+
+/**
+ * \brief Splits a bipartite "can match" relation into connected components.
+ *
+ * Two sets (left: camera 0 blobs or this frame's markers; right: camera 1 blobs or the previous
+ * frame's markers). Rows and columns in different components have zero proximity, so the SVD of
+ * the whole matrix is the union of the SVDs of the blocks: solving per block changes nothing but
+ * the cost. Storage is sized in the constructor.
+ */
+class BipartiteBlocks {
+public:
+    BipartiteBlocks(std::size_t maxLeft, std::size_t maxRight);
+
+    /// \brief Start over with \a left and \a right elements, none linked.
+    void reset(std::size_t left, std::size_t right);
+    /// \brief Left element \a i may correspond to right element \a j.
+    void link(std::size_t i, std::size_t j);
+    /// \brief Group the elements into blocks; call after the last link().
+    void build();
+
+    std::size_t blockCount() const { return blockCount_; }
+    std::span<const int> leftOf(std::size_t block) const;
+    std::span<const int> rightOf(std::size_t block) const;
+
+private:
+    int root(int node);
+
+    std::size_t maxLeft_, maxRight_;
+    std::size_t left_ = 0, right_ = 0;
+    std::unique_ptr<int[]> parent_;
+    std::unique_ptr<int[]> blockOfRoot_;
+    std::unique_ptr<int[]> leftStart_, rightStart_;
+    std::unique_ptr<int[]> leftMembers_, rightMembers_;
+    std::size_t blockCount_ = 0;
+};
+
+/**
+ * \brief Solves one block by Scott and Longuet-Higgins: G = U D V^T, P = U V^T (all singular values
+ * set to one), and a pair is accepted when P(r, c) is the largest of its row and of its column and
+ * G(r, c) >= minProximity.
+ */
+class SlhSolver {
+public:
+    /// \brief Calls accept(r, c) for each accepted pair of \a proximity.
+    template <typename Accept>
+    void solve(const ProximityBlock& proximity, double minProximity, Accept&& accept) {
+        const Eigen::Index rows = proximity.rows(), cols = proximity.cols();
+        if (rows == 0 || cols == 0)
+            return;
+        if (rows == 1 && cols == 1) {
+            if (proximity(0, 0) >= minProximity)
+                accept(0, 0);
+            return;
+        }
+        svd_.compute(proximity, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        orthogonal_.noalias() = svd_.matrixU() * svd_.matrixV().transpose();
+        acceptMutualMaxima(orthogonal_, proximity, minProximity, accept);
+    }
+
+    /// \brief The fallback for oversized blocks: mutual maxima of the proximity itself.
+    template <typename Matrix, typename Accept>
+    static void mutualBest(const Matrix& proximity, double minProximity, Accept&& accept) {
+        acceptMutualMaxima(proximity, proximity, minProximity, accept);
+    }
+
+private:
+    template <typename Score, typename Matrix, typename Accept>
+    static void acceptMutualMaxima(const Score& score, const Matrix& proximity, double minProximity,
+                                   Accept&& accept) {
+        for (Eigen::Index r = 0; r < score.rows(); ++r) {
+            Eigen::Index best = 0;
+            score.row(r).maxCoeff(&best);
+            Eigen::Index bestRow = 0;
+            score.col(best).maxCoeff(&bestRow);
+            if (bestRow == r && proximity(r, best) >= minProximity)
+                accept(static_cast<int>(r), static_cast<int>(best));
+        }
+    }
+
+    Eigen::JacobiSVD<ProximityBlock> svd_;
+    ProximityBlock orthogonal_;
+};
+
+} // namespace edgetrack

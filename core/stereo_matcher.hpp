@@ -1,0 +1,131 @@
+// Stereo correspondence of blobs (paper section 3.1, eq. 1-4) and triangulation into 3D markers.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+
+#include "core/blob_detector.hpp"
+#include "core/bounded_vector.hpp"
+#include "core/correspondence.hpp"
+#include "core/stereo_rig.hpp"
+
+namespace edgetrack {
+
+/// \brief Tuning of the stereo matcher; defaults suit the simulated desktop rig.
+struct StereoConfig {
+    /// sigma_ep of eq. 1: expected epipolar error in rectified pixels (calibration and centroids).
+    double sigmaEpipolar_px = 0.8;
+    /// Proximity is exactly zero beyond this many sigma_ep; it bounds the independent blocks.
+    double epipolarBand_sigmas = 4.0;
+    /// sigma_sim of eq. 4: expected difference of neighbourhood layouts (rectified px).
+    double sigmaSimilarity_px = 10.0;
+    /// S: side of the square region R around each blob whose neighbours are compared (eq. 2).
+    double neighbourhood_px = 120.0;
+    /// Working volume along the rectified depth axis; sets the admissible disparities.
+    double minDepth_mm = 200.0;
+    double maxDepth_mm = 2500.0;
+    /// A correspondence needs at least this proximity G_ij.
+    double minProximity = 1e-3;
+    /// Triangulated rays may miss each other by at most this much.
+    double maxRayGap_mm = 1.5;
+    /// A marker must reproject within this distance of both its blobs.
+    double maxReprojection_px = 1.5;
+    /// Markers kept per frame; more are counted as overflow.
+    std::size_t maxMarkers = 256;
+};
+
+/// \brief A triangulated marker and the blobs it came from.
+struct StereoMarker {
+    int blob0 = -1;
+    int blob1 = -1;
+    /// Rig frame (mm).
+    Vec3 position_rig_mm = Vec3::Zero();
+    float rayGap_mm = 0.0f;
+    float reprojection_px = 0.0f;
+};
+
+/// \brief A correspondence between element \a left of one set and \a right of the other.
+struct IndexPair {
+    int left = -1;
+    int right = -1;
+};
+
+struct StereoCounters {
+    std::uint64_t frames = 0;
+    std::uint64_t blocks = 0;
+    std::uint64_t largestBlock = 0;
+    std::uint64_t blockOverflow = 0;
+    std::uint64_t correspondences = 0;
+    std::uint64_t rejectedRayGap = 0;
+    std::uint64_t rejectedReprojection = 0;
+    std::uint64_t unrectifiable = 0;
+    std::uint64_t markerOverflow = 0;
+};
+
+/**
+ * \brief Pairs blobs of the two cameras by the method of Scott and Longuet-Higgins with the paper's
+ * proximity (epipolar term eq. 1 times neighbourhood-similarity term eq. 2-4), then triangulates.
+ *
+ * All storage is sized in the constructor from maxBlobsPerCamera and the configuration.
+ */
+class StereoMatcher {
+public:
+    StereoMatcher(const StereoRig& rig, const StereoConfig& config, std::size_t maxBlobsPerCamera);
+    ~StereoMatcher();
+    StereoMatcher(const StereoMatcher&) = delete;
+    StereoMatcher& operator=(const StereoMatcher&) = delete;
+
+    bool isValid() const { return valid_; }
+
+    /// \brief The paper's matcher: blobs of both cameras in, triangulated markers out.
+    void match(std::span<const Blob> blobs0, std::span<const Blob> blobs1,
+               BoundedVectorView<StereoMarker>& out);
+
+    /**
+     * \brief The baseline of the paper's Figure 6: every pair within the epipolar band and the
+     * disparity range becomes a marker (no uniqueness, no similarity, no ray checks).
+     */
+    void matchEpipolarOnly(std::span<const Blob> blobs0, std::span<const Blob> blobs1,
+                           BoundedVectorView<StereoMarker>& out);
+
+    // The steps of match(), public so that tests can compare against a full-matrix solution.
+    /// \brief Undistort, rectify and cast rays for both cameras' blobs.
+    void prepare(std::span<const Blob> blobs0, std::span<const Blob> blobs1);
+    /// \return G_ij of eq. 4 for prepared blobs (0 outside the band or the disparity range).
+    double proximity(int i, int j) const;
+    /// \brief SVD correspondence per block: fills \a pairs with (blob0, blob1) indices.
+    void correspond(BoundedVectorView<IndexPair>& pairs);
+
+    const StereoCounters& counters() const { return counters_; }
+    const StereoConfig& config() const { return config_; }
+    const StereoRig& rig() const { return rig_; }
+
+private:
+    struct Prepared;
+
+    bool inBand(int i, int j) const;
+    double neighbourhoodDistance(int i, int j) const;
+    void collectNeighbours(int camera);
+    void triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out);
+    void mutualBestOfLargeBlock(std::span<const int> rows, std::span<const int> cols,
+                                BoundedVectorView<IndexPair>& pairs);
+
+    StereoRig rig_;
+    StereoConfig config_;
+    std::size_t maxBlobs_;
+    bool valid_ = false;
+    double minDisparity_px_ = 0.0;
+    double maxDisparity_px_ = 0.0;
+    double band_px_ = 0.0;
+    StereoCounters counters_{};
+
+    std::unique_ptr<Prepared> prepared_;
+    BipartiteBlocks blocks_;
+    SlhSolver solver_;
+    ProximityBlock block_;
+    BoundedVector<IndexPair> pairs_;
+};
+
+} // namespace edgetrack

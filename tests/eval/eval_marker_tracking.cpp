@@ -1,0 +1,251 @@
+// Measures marker tracking (blobs, stereo, frame-to-frame) on simulated scenes against ground
+// truth.
+//
+//   eval_marker_tracking --scene two_cubes --frames 2000 [--seed 1] [--matcher svd|epipolar]
+//                        [--require-found 0.99] [--require-false 0.01] [--require-switches 1e-4]
+//
+// Renders each frame at images level, runs the core pipeline exactly as the firmware does, and
+// compares with the simulator's truth. Exits 1 when a --require target is missed.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "core/blob_detector.hpp"
+#include "core/marker_tracker.hpp"
+#include "core/stereo_matcher.hpp"
+#include "hal/sim/levels.hpp"
+#include "hal/sim/world.hpp"
+
+using namespace edgetrack;
+
+namespace {
+
+struct Totals {
+    std::uint64_t frames = 0;
+    std::uint64_t separatelyVisible = 0;
+    std::uint64_t visibleToBoth = 0;
+    std::uint64_t foundOfMerged = 0;
+    std::uint64_t found = 0;
+    std::uint64_t missedNoBlob = 0;
+    std::uint64_t missedByStereo = 0;
+    std::uint64_t falseMarkers = 0;
+    std::uint64_t spuriousPointsFound = 0;
+    double squaredError = 0.0;
+    double maxError = 0.0;
+    std::uint64_t continuedMarkerFrames = 0;
+    std::uint64_t idBreaks = 0;
+    std::uint64_t idSwaps = 0;
+};
+
+constexpr double kFoundRadius_mm = 2.0;
+
+} // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"Marker-tracking quality on a simulated scene"};
+    std::string sceneName = "two_cubes";
+    std::int64_t frames = 1000;
+    std::uint64_t seed = 1;
+    std::string matcher = "svd";
+    double requireFound = -1.0, requireFalse = -1.0, requireSwitches = -1.0;
+    app.add_option("--scene", sceneName);
+    app.add_option("--frames", frames)->check(CLI::PositiveNumber);
+    app.add_option("--seed", seed);
+    app.add_option("--matcher", matcher)->check(CLI::IsMember({"svd", "epipolar"}));
+    app.add_option("--require-found", requireFound, "minimum share of markers found");
+    app.add_option("--require-false", requireFalse, "maximum false markers per true marker");
+    app.add_option("--require-switches", requireSwitches, "maximum ID switches per marker-frame");
+    CLI11_PARSE(app, argc, argv);
+
+    std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
+    if (!scene) {
+        std::fprintf(stderr, "unknown scene %s\n", sceneName.c_str());
+        return 2;
+    }
+    const sim::World world(std::move(*scene), seed);
+    const sim::RigSpec& rigSpec = world.scene().rig;
+    const sim::FrameRenderer renderer(rigSpec.width_px, rigSpec.height_px,
+                                      world.scene().background_dn, world.scene().noiseSigma_dn,
+                                      seed);
+    const BlobDetectorConfig blobConfig;
+    BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
+    BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
+    const StereoConfig stereoConfig;
+    StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
+    MarkerTracker tracker{FrameToFrameConfig{}};
+
+    std::vector<std::uint8_t> image0(
+        static_cast<std::size_t>(rigSpec.width_px * rigSpec.height_px));
+    std::vector<std::uint8_t> image1(image0.size());
+    BoundedVector<Blob> blobs0(blobConfig.maxBlobs), blobs1(blobConfig.maxBlobs);
+    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
+    std::vector<Vec3> points;
+    sim::Observation observation;
+    std::vector<int> visible;
+    Totals totals;
+    // Truth marker (object * 1000 + marker) -> tracker ID in the previous frame, and back.
+    std::map<int, std::uint32_t> idOfTruth, previousIdOfTruth;
+    std::map<std::uint32_t, int> truthOfId, previousTruthOfId;
+
+    for (std::int64_t f = 0; f < frames; ++f) {
+        const auto frame = static_cast<std::uint64_t>(f);
+        world.observe(frame, observation);
+        renderer.render(image0, rigSpec.width_px, 0, observation, 1.0, frame);
+        renderer.render(image1, rigSpec.width_px, 1, observation, 1.0, frame);
+        detector0.detect(image0.data(), rigSpec.width_px, blobs0);
+        detector1.detect(image1.data(), rigSpec.width_px, blobs1);
+        if (matcher == "svd")
+            stereo.match(blobs0.span(), blobs1.span(), markers);
+        else
+            stereo.matchEpipolarOnly(blobs0.span(), blobs1.span(), markers);
+        points.clear();
+        for (const StereoMarker& m : markers)
+            points.push_back(m.position_rig_mm);
+        const std::span<const TrackedMarker> tracked = tracker.update(observation.time_s, points);
+
+        sim::separatelyVisible(observation, visible);
+        for (const sim::MarkerView& m : observation.markers)
+            totals.visibleToBoth += (m.visible[0] && m.visible[1]) ? 1u : 0u;
+        const std::size_t markerCount = observation.markers.size();
+        std::vector<bool> used(points.size(), false);
+        idOfTruth.clear();
+        truthOfId.clear();
+        for (const int source : visible) {
+            if (static_cast<std::size_t>(source) >= markerCount)
+                continue; // a spurious reflective point: real, but not a marker
+            const sim::MarkerView& truth = observation.markers[static_cast<std::size_t>(source)];
+            ++totals.separatelyVisible;
+            int nearest = -1;
+            double nearestDistance = kFoundRadius_mm;
+            for (std::size_t k = 0; k < points.size(); ++k) {
+                const double d = (points[k] - truth.position_rig_mm).norm();
+                if (!used[k] && d < nearestDistance) {
+                    nearestDistance = d;
+                    nearest = static_cast<int>(k);
+                }
+            }
+            if (nearest < 0) {
+                // Why: no blob where the marker projects (merged, rejected), or stereo missed it.
+                bool blobs = true;
+                for (int c = 0; c < 2; ++c) {
+                    const auto& list = c == 0 ? blobs0 : blobs1;
+                    bool near = false;
+                    for (const Blob& b : list)
+                        near =
+                            near ||
+                            (b.centre_px - truth.pixel[static_cast<std::size_t>(c)]).norm() < 1.5;
+                    blobs = blobs && near;
+                }
+                ++(blobs ? totals.missedByStereo : totals.missedNoBlob);
+                continue;
+            }
+            used[static_cast<std::size_t>(nearest)] = true;
+            ++totals.found;
+            totals.squaredError += nearestDistance * nearestDistance;
+            totals.maxError = std::max(totals.maxError, nearestDistance);
+            if (matcher == "svd") {
+                const int key = truth.object * 1000 + truth.marker;
+                const std::uint32_t id = tracked[static_cast<std::size_t>(nearest)].id;
+                idOfTruth[key] = id;
+                truthOfId[id] = key;
+                if (auto before = previousIdOfTruth.find(key); before != previousIdOfTruth.end()) {
+                    ++totals.continuedMarkerFrames;
+                    if (before->second != id)
+                        ++totals.idBreaks;
+                }
+                if (auto before = previousTruthOfId.find(id);
+                    before != previousTruthOfId.end() && before->second != key)
+                    ++totals.idSwaps;
+            }
+        }
+        // Unclaimed reconstructions: near some true marker (merged or partly hidden) or a real
+        // spurious point they are not false; anything else is a false marker.
+        for (std::size_t k = 0; k < points.size(); ++k) {
+            if (used[k])
+                continue;
+            bool real = false, exact = false;
+            for (const sim::MarkerView& m : observation.markers) {
+                const double d = (m.position_rig_mm - points[k]).norm();
+                real = real || d < 3.0;
+                exact = exact || (d < kFoundRadius_mm && m.visible[0] && m.visible[1]);
+            }
+            totals.foundOfMerged += exact ? 1u : 0u;
+            bool spurious = false;
+            for (const sim::MarkerView& s : observation.spuriousPoints)
+                spurious = spurious || (s.position_rig_mm - points[k]).norm() < 3.0;
+            if (spurious)
+                ++totals.spuriousPointsFound;
+            else if (!real)
+                ++totals.falseMarkers;
+        }
+        previousIdOfTruth.swap(idOfTruth);
+        previousTruthOfId.swap(truthOfId);
+        ++totals.frames;
+    }
+
+    const double foundShare =
+        static_cast<double>(totals.found) /
+        static_cast<double>(std::max<std::uint64_t>(1, totals.separatelyVisible));
+    const double falseShare =
+        static_cast<double>(totals.falseMarkers) /
+        static_cast<double>(std::max<std::uint64_t>(1, totals.separatelyVisible));
+    const double rms = std::sqrt(totals.squaredError /
+                                 static_cast<double>(std::max<std::uint64_t>(1, totals.found)));
+    const double switches =
+        static_cast<double>(totals.idBreaks + totals.idSwaps) /
+        static_cast<double>(std::max<std::uint64_t>(1, totals.continuedMarkerFrames));
+    std::printf("scene %s, seed %llu, %llu frames, matcher %s\n", sceneName.c_str(),
+                static_cast<unsigned long long>(seed),
+                static_cast<unsigned long long>(totals.frames), matcher.c_str());
+    std::printf("  markers seen by both cameras (not merged): %llu\n",
+                static_cast<unsigned long long>(totals.separatelyVisible));
+    std::printf("  found: %.4f%%   false markers: %llu (%.4f%% of true)   spurious points: %llu\n",
+                100.0 * foundShare, static_cast<unsigned long long>(totals.falseMarkers),
+                100.0 * falseShare, static_cast<unsigned long long>(totals.spuriousPointsFound));
+    std::printf("  of all %llu markers seen by both cameras, merged or not: %.4f%% found\n",
+                static_cast<unsigned long long>(totals.visibleToBoth),
+                100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /
+                    static_cast<double>(std::max<std::uint64_t>(1, totals.visibleToBoth)));
+    std::printf("  missed: %llu without a blob in some camera, %llu by stereo\n",
+                static_cast<unsigned long long>(totals.missedNoBlob),
+                static_cast<unsigned long long>(totals.missedByStereo));
+    std::printf("  3D error: RMS %.3f mm, max %.3f mm\n", rms, totals.maxError);
+    if (matcher == "svd")
+        std::printf("  frame-to-frame: %llu marker-frames, %llu ID breaks, %llu ID swaps "
+                    "(%.2f per 10,000)\n",
+                    static_cast<unsigned long long>(totals.continuedMarkerFrames),
+                    static_cast<unsigned long long>(totals.idBreaks),
+                    static_cast<unsigned long long>(totals.idSwaps), switches * 1e4);
+    const StereoCounters& sc = stereo.counters();
+    std::printf("  stereo: largest block %llu, block overflows %llu, rejected by ray gap %llu, by "
+                "reprojection %llu\n",
+                static_cast<unsigned long long>(sc.largestBlock),
+                static_cast<unsigned long long>(sc.blockOverflow),
+                static_cast<unsigned long long>(sc.rejectedRayGap),
+                static_cast<unsigned long long>(sc.rejectedReprojection));
+    const BlobCounters& bc = detector0.counters();
+    std::printf("  blobs (camera 0): accepted %llu, not round %llu, small %llu, large %llu\n",
+                static_cast<unsigned long long>(bc.accepted),
+                static_cast<unsigned long long>(bc.rejectedNotRound),
+                static_cast<unsigned long long>(bc.rejectedSmall),
+                static_cast<unsigned long long>(bc.rejectedLarge));
+
+    bool ok = true;
+    if (requireFound >= 0.0 && foundShare < requireFound) {
+        std::printf("FAIL: found %.4f < %.4f\n", foundShare, requireFound);
+        ok = false;
+    }
+    if (requireFalse >= 0.0 && falseShare > requireFalse) {
+        std::printf("FAIL: false %.4f > %.4f\n", falseShare, requireFalse);
+        ok = false;
+    }
+    if (requireSwitches >= 0.0 && switches > requireSwitches) {
+        std::printf("FAIL: switches %.6f > %.6f\n", switches, requireSwitches);
+        ok = false;
+    }
+    return ok ? 0 : 1;
+}
