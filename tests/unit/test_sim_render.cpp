@@ -165,11 +165,15 @@ TEST(SimLevels, OverlappingMarkersMergeIntoOneBlob) {
     a.visible = {true, true};
     a.pixel = {Vec2(100, 100), Vec2(90, 100)};
     a.radius_px = {4, 4};
+    a.peak_dn = {1000, 1000};
     b = a;
     b.pixel = {Vec2(105, 100), Vec2(140, 100)}; // touches a in camera 0 only
+    MarkerView faint = a;
+    faint.pixel = {Vec2(600, 500), Vec2(600, 500)};
+    faint.peak_dn = {50, 50}; // below the detection level: no blob
     far = a;
     far.pixel = {Vec2(400, 300), Vec2(380, 300)};
-    obs.markers = {a, b, far};
+    obs.markers = {a, b, far, faint};
     LevelNoise exact;
     exact.blobCentreSigma_px = 0.0;
     exact.pointSigma_mm = 0.0;
