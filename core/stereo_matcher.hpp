@@ -20,9 +20,9 @@ struct StereoConfig {
     /// Proximity is exactly zero beyond this many sigma_ep; it bounds the independent blocks.
     double epipolarBand_sigmas = 4.0;
     /// sigma_sim of eq. 4: expected difference of neighbourhood layouts (rectified px).
-    double sigmaSimilarity_px = 10.0;
+    double sigmaSimilarity_px = 20.0;
     /// S: side of the square region R around each blob whose neighbours are compared (eq. 2).
-    double neighbourhood_px = 120.0;
+    double neighbourhood_px = 160.0;
     /// Working volume along the rectified depth axis; sets the admissible disparities.
     double minDepth_mm = 200.0;
     double maxDepth_mm = 2500.0;

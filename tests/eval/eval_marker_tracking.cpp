@@ -59,6 +59,11 @@ int main(int argc, char** argv) {
     app.add_option("--require-found", requireFound, "minimum share of markers found");
     app.add_option("--require-false", requireFalse, "maximum false markers per true marker");
     app.add_option("--require-switches", requireSwitches, "maximum ID switches per marker-frame");
+    StereoConfig stereoConfig;
+    app.add_option("--sigma-epipolar", stereoConfig.sigmaEpipolar_px, "sigma_ep of eq. 1 (px)");
+    app.add_option("--sigma-similarity", stereoConfig.sigmaSimilarity_px,
+                   "sigma_sim of eq. 4 (px)");
+    app.add_option("--region", stereoConfig.neighbourhood_px, "S, side of region R (px)");
     CLI11_PARSE(app, argc, argv);
 
     std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
@@ -74,7 +79,6 @@ int main(int argc, char** argv) {
     const BlobDetectorConfig blobConfig;
     BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
     BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
-    const StereoConfig stereoConfig;
     StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
     MarkerTracker tracker{FrameToFrameConfig{}};
 

@@ -1,0 +1,247 @@
+// Tests of the blob detector against truth and against a plain flood-fill reference.
+#include <queue>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "core/blob_detector.hpp"
+#include "hal/sim/world.hpp"
+#include "tests/support/alloc_guard.hpp"
+
+using namespace edgetrack;
+
+namespace {
+
+struct Image {
+    int width;
+    int height;
+    int stride;
+    std::vector<std::uint8_t> pixels;
+
+    Image(int w, int h, int s = 0)
+        : width(w)
+        , height(h)
+        , stride(s > 0 ? s : w)
+        , pixels(static_cast<std::size_t>(stride * h), 10) {}
+    std::uint8_t& at(int x, int y) { return pixels[static_cast<std::size_t>(y * stride + x)]; }
+};
+
+// Draws spots with the simulator's renderer profile (blurred saturating discs).
+void drawSpots(Image& image, const std::vector<sim::Glint>& spots) {
+    const sim::FrameRenderer renderer(image.width, image.height, 10.0, 0.0, 1);
+    sim::Observation obs;
+    obs.glints[0] = spots;
+    // The renderer writes rows of `width` at `stride`; padding bytes keep their value.
+    renderer.render(image.pixels, image.stride, 0, obs, 1.0, 0);
+}
+
+sim::Glint disc(double x, double y, double radius, double peak = 900.0) {
+    sim::Glint g;
+    g.centre_px = {x, y};
+    g.radiusMajor_px = g.radiusMinor_px = radius;
+    g.peak_dn = peak;
+    return g;
+}
+
+// Reference: breadth-first 8-connected labelling and the same moments, pixel by pixel.
+struct ReferenceBlob {
+    Vec2 centre;
+    int area;
+};
+std::vector<ReferenceBlob> referenceComponents(Image& image, std::uint8_t threshold) {
+    std::vector<int> label(static_cast<std::size_t>(image.width * image.height), -1);
+    std::vector<ReferenceBlob> out;
+    for (int y = 0; y < image.height; ++y)
+        for (int x = 0; x < image.width; ++x) {
+            if (image.at(x, y) < threshold ||
+                label[static_cast<std::size_t>(y * image.width + x)] >= 0)
+                continue;
+            double sumI = 0, sumIx = 0, sumIy = 0;
+            int area = 0;
+            std::queue<std::pair<int, int>> queue;
+            queue.push({x, y});
+            label[static_cast<std::size_t>(y * image.width + x)] = 1;
+            while (!queue.empty()) {
+                const auto [px, py] = queue.front();
+                queue.pop();
+                const double intensity = image.at(px, py);
+                sumI += intensity;
+                sumIx += intensity * px;
+                sumIy += intensity * py;
+                ++area;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int nx = px + dx, ny = py + dy;
+                        if (nx < 0 || ny < 0 || nx >= image.width || ny >= image.height)
+                            continue;
+                        auto& l = label[static_cast<std::size_t>(ny * image.width + nx)];
+                        if (l < 0 && image.at(nx, ny) >= threshold) {
+                            l = 1;
+                            queue.push({nx, ny});
+                        }
+                    }
+            }
+            out.push_back({Vec2(sumIx / sumI, sumIy / sumI), area});
+        }
+    return out;
+}
+
+BlobDetectorConfig permissive() {
+    // Accepts every component, so the comparison with the reference covers all of them.
+    BlobDetectorConfig c;
+    c.minArea_px = 1;
+    c.maxArea_px = 1 << 30;
+    c.maxElongation = 1e9;
+    c.minFill = 0.0;
+    c.maxBlobs = 4096;
+    c.maxLabels = 1 << 16;
+    return c;
+}
+
+} // namespace
+
+TEST(BlobDetector, CentresOfIsolatedDiscsAreSubPixel) {
+    Image image(1280, 800);
+    std::vector<sim::Glint> spots;
+    std::mt19937 random(2);
+    std::uniform_real_distribution<double> x(20, 1260), y(20, 780), r(2.5, 7.0);
+    std::vector<Vec2> centres;
+    while (spots.size() < 40) {
+        const sim::Glint g = disc(x(random), y(random), r(random));
+        bool apart = true;
+        for (const sim::Glint& o : spots)
+            apart = apart && (o.centre_px - g.centre_px).norm() > 30.0;
+        if (apart)
+            spots.push_back(g);
+    }
+    drawSpots(image, spots);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    ASSERT_TRUE(detector.isValid());
+    FixedVector<Blob, 64> blobs;
+    detector.detect(image.pixels.data(), image.stride, blobs);
+    ASSERT_EQ(blobs.size(), spots.size());
+    double sum = 0.0;
+    for (const sim::Glint& g : spots) {
+        double nearest = 1e9;
+        for (const Blob& b : blobs)
+            nearest = std::min(nearest, (b.centre_px - g.centre_px).norm());
+        // Cutting the blurred edge at the threshold biases small discs by a few hundredths.
+        EXPECT_LT(nearest, 0.06);
+        sum += nearest;
+    }
+    EXPECT_LT(sum / static_cast<double>(spots.size()), 0.03);
+    for (const Blob& b : blobs) {
+        EXPECT_LT(b.elongation, 1.1f);
+        EXPECT_EQ(b.peak, 255);
+    }
+}
+
+TEST(BlobDetector, AgreesWithFloodFillOnEveryLayout) {
+    // Odd widths, a stride with padding, blobs across 64-byte boundaries and at every edge.
+    for (const auto& [w, h, stride] : {std::tuple{1280, 800, 1280}, std::tuple{1000, 301, 1024},
+                                       std::tuple{77, 50, 80}, std::tuple{64, 64, 64}}) {
+        Image image(w, h, stride);
+        std::vector<sim::Glint> spots;
+        std::mt19937 random(static_cast<unsigned>(w));
+        std::uniform_real_distribution<double> x(-3, w + 3), y(-3, h + 3), r(0.7, 9.0);
+        for (int i = 0; i < 60; ++i)
+            spots.push_back(disc(x(random), y(random), r(random), 400.0));
+        spots.push_back(disc(63.5, 10.0, 3.0));   // across the first 64-byte boundary
+        spots.push_back(disc(w - 1.0, 5.0, 3.0)); // on the right edge
+        drawSpots(image, spots);
+        // Isolated specks and a full-width line too.
+        image.at(0, h - 1) = 255;
+        image.at(w - 1, h - 1) = 255;
+        for (int xx = 0; xx < w; ++xx)
+            image.at(xx, h / 2) = 200;
+
+        const BlobDetectorConfig config = permissive();
+        BlobDetector detector(config, w, h);
+        BoundedVector<Blob> blobs(config.maxBlobs);
+        detector.detect(image.pixels.data(), stride, blobs);
+        const std::vector<ReferenceBlob> reference = referenceComponents(image, config.threshold);
+        ASSERT_EQ(blobs.size(), reference.size()) << w << "x" << h;
+        for (const ReferenceBlob& expected : reference) {
+            bool matched = false;
+            for (const Blob& b : blobs)
+                matched = matched || ((b.centre_px - expected.centre).norm() < 1e-9 &&
+                                      static_cast<int>(b.area_px) == expected.area);
+            EXPECT_TRUE(matched) << w << "x" << h << " blob at " << expected.centre.transpose();
+        }
+    }
+}
+
+TEST(BlobDetector, RejectsMergedElongatedSmallAndLargeBlobs) {
+    Image image(640, 480);
+    sim::Glint streak = disc(400, 100, 2.0);
+    streak.radiusMajor_px = 12.0;
+    streak.radiusMinor_px = 1.5;
+    streak.angle_rad = 0.4;
+    drawSpots(image, {disc(100, 100, 5.0), disc(100 + 9.0, 100, 5.0), // two touching markers
+                      disc(300, 300, 5.0),                            // a good one
+                      streak, disc(500, 400, 0.8, 200.0),             // a streak, a speck
+                      disc(200, 380, 40.0)});                         // a lamp
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    ASSERT_EQ(blobs.size(), 1u);
+    EXPECT_NEAR(blobs[0].centre_px.x(), 300.0, 0.02);
+    const BlobCounters& c = detector.counters();
+    EXPECT_EQ(c.rejectedNotRound, 2u);
+    EXPECT_EQ(c.rejectedSmall, 1u);
+    EXPECT_EQ(c.rejectedLarge, 1u);
+}
+
+TEST(BlobDetector, OverflowIsCountedNotWritten) {
+    Image image(640, 480);
+    std::vector<sim::Glint> spots;
+    for (int row = 0; row < 10; ++row)
+        for (int col = 0; col < 20; ++col)
+            spots.push_back(disc(15.0 + col * 30.0, 15.0 + row * 30.0, 3.0));
+    drawSpots(image, spots);
+    BlobDetectorConfig config;
+    config.maxBlobs = 150;
+    BlobDetector detector(config, image.width, image.height);
+    BoundedVector<Blob> blobs(config.maxBlobs);
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(blobs.size(), 150u);
+    EXPECT_EQ(detector.counters().blobOverflow, 50u);
+}
+
+TEST(BlobDetector, FloodOfSpecksExhaustsLabelsSafely) {
+    Image image(512, 512);
+    for (int y = 0; y < 512; y += 2)
+        for (int x = 0; x < 512; x += 2)
+            image.at(x, y) = 255; // 65536 isolated pixels
+    BlobDetectorConfig config;
+    config.maxLabels = 1000;
+    BlobDetector detector(config, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_TRUE(blobs.empty());
+    EXPECT_EQ(detector.counters().labelOverflow, 1u);
+    EXPECT_EQ(detector.counters().rejectedSmall, 1000u);
+}
+
+TEST(BlobDetector, RejectsBadConfiguration) {
+    BlobDetectorConfig config;
+    config.maxArea_px = 1;
+    EXPECT_FALSE(BlobDetector(config, 640, 480).isValid());
+    EXPECT_FALSE(BlobDetector(BlobDetectorConfig{}, 0, 480).isValid());
+}
+
+TEST(BlobDetector, DetectingDoesNotAllocate) {
+    Image image(1280, 800);
+    std::vector<sim::Glint> spots;
+    for (int i = 0; i < 60; ++i)
+        spots.push_back(disc(30.0 + (i % 10) * 120.0, 40.0 + (i / 10) * 120.0, 4.0));
+    drawSpots(image, spots);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    BoundedVector<Blob> blobs(256);
+    const auto count = test::countAllocations([&] {
+        for (int i = 0; i < 50; ++i)
+            detector.detect(image.pixels.data(), image.width, blobs);
+    });
+    EXPECT_EQ(count, 0u);
+    EXPECT_EQ(blobs.size(), 60u);
+}

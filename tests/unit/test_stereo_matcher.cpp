@@ -1,0 +1,201 @@
+// Tests of stereo correspondence: block solution equals the full-matrix SVD, markers are exact,
+// the epipolar-only baseline makes false markers that SVD matching avoids.
+#include <random>
+#include <set>
+
+#include <Eigen/SVD>
+#include <gtest/gtest.h>
+
+#include "core/correspondence.hpp"
+#include "core/stereo_matcher.hpp"
+#include "hal/sim/scene.hpp"
+#include "tests/support/alloc_guard.hpp"
+
+using namespace edgetrack;
+
+namespace {
+
+const StereoRig& simRig() {
+    static const StereoRig rig = sim::makeRig(sim::RigSpec{});
+    return rig;
+}
+
+// Blobs of both cameras for points in the rig frame (exact projections, optional pixel noise).
+struct BlobSets {
+    std::vector<Blob> camera[2];
+    std::vector<int> truthIndex[2];
+};
+
+BlobSets project(const std::vector<Vec3>& points, double noise_px = 0.0, unsigned seed = 1) {
+    BlobSets sets;
+    std::mt19937 random(seed);
+    std::normal_distribution<double> noise(0.0, noise_px > 0.0 ? noise_px : 1e-300);
+    for (int c = 0; c < 2; ++c)
+        for (std::size_t i = 0; i < points.size(); ++i)
+            if (auto pixel = simRig().camera(c).project(points[i])) {
+                Blob b;
+                b.centre_px =
+                    *pixel + (noise_px > 0.0 ? Vec2(noise(random), noise(random)) : Vec2::Zero());
+                sets.camera[c].push_back(b);
+                sets.truthIndex[c].push_back(static_cast<int>(i));
+            }
+    // Cameras report blobs in their own order, not the truth's.
+    std::shuffle(sets.camera[1].begin(), sets.camera[1].end(), random);
+    return sets;
+}
+
+std::vector<Vec3> randomMarkers(int count, unsigned seed) {
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> x(-100, 220), y(-130, 130), z(450, 700);
+    std::vector<Vec3> points;
+    while (static_cast<int>(points.size()) < count) {
+        const Vec3 p(x(random), y(random), z(random));
+        bool apart = true;
+        for (const Vec3& q : points)
+            apart = apart && (p - q).norm() > 12.0;
+        if (apart)
+            points.push_back(p);
+    }
+    return points;
+}
+
+} // namespace
+
+TEST(BipartiteBlocks, GroupsConnectedElements) {
+    BipartiteBlocks blocks(8, 8);
+    blocks.reset(5, 4);
+    blocks.link(0, 0);
+    blocks.link(1, 0);
+    blocks.link(1, 1);
+    blocks.link(3, 3);
+    // Left 2 and 4 and right 2 are linked to nothing.
+    blocks.build();
+    ASSERT_EQ(blocks.blockCount(), 2u);
+    std::set<std::vector<int>> lefts, rights;
+    for (std::size_t b = 0; b < 2; ++b) {
+        lefts.insert({blocks.leftOf(b).begin(), blocks.leftOf(b).end()});
+        rights.insert({blocks.rightOf(b).begin(), blocks.rightOf(b).end()});
+    }
+    EXPECT_EQ(lefts, (std::set<std::vector<int>>{{0, 1}, {3}}));
+    EXPECT_EQ(rights, (std::set<std::vector<int>>{{0, 1}, {3}}));
+}
+
+TEST(StereoMatcher, BlocksGiveTheSameAnswerAsTheWholeMatrix) {
+    for (unsigned seed = 1; seed <= 20; ++seed) {
+        const std::vector<Vec3> points = randomMarkers(20 + static_cast<int>(seed) * 3, seed);
+        const BlobSets sets = project(points, 0.3, seed);
+        StereoMatcher matcher(simRig(), StereoConfig{}, 256);
+        matcher.prepare(sets.camera[0], sets.camera[1]);
+        BoundedVector<IndexPair> pairs(256);
+        matcher.correspond(pairs);
+
+        // The whole proximity matrix, decomposed at once with a dynamic Eigen SVD.
+        const auto rows = static_cast<Eigen::Index>(sets.camera[0].size());
+        const auto cols = static_cast<Eigen::Index>(sets.camera[1].size());
+        Eigen::MatrixXd g(rows, cols);
+        for (Eigen::Index i = 0; i < rows; ++i)
+            for (Eigen::Index j = 0; j < cols; ++j)
+                g(i, j) = matcher.proximity(static_cast<int>(i), static_cast<int>(j));
+        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(g, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        const Eigen::MatrixXd p = svd.matrixU() * svd.matrixV().transpose();
+        std::set<std::pair<int, int>> whole;
+        for (Eigen::Index i = 0; i < rows; ++i) {
+            Eigen::Index j = 0, back = 0;
+            p.row(i).maxCoeff(&j);
+            p.col(j).maxCoeff(&back);
+            if (back == i && g(i, j) >= StereoConfig{}.minProximity)
+                whole.insert({static_cast<int>(i), static_cast<int>(j)});
+        }
+        std::set<std::pair<int, int>> blocked;
+        for (const IndexPair& pair : pairs)
+            blocked.insert({pair.left, pair.right});
+        EXPECT_EQ(blocked, whole) << "seed " << seed;
+        EXPECT_GT(matcher.counters().blocks, 1u);
+    }
+}
+
+TEST(StereoMatcher, FindsEveryMarkerExactly) {
+    const std::vector<Vec3> points = randomMarkers(60, 7);
+    const BlobSets sets = project(points);
+    StereoMatcher matcher(simRig(), StereoConfig{}, 256);
+    ASSERT_TRUE(matcher.isValid());
+    BoundedVector<StereoMarker> markers(256);
+    matcher.match(sets.camera[0], sets.camera[1], markers);
+    ASSERT_EQ(markers.size(), points.size());
+    for (const StereoMarker& m : markers) {
+        double nearest = 1e9;
+        for (const Vec3& p : points)
+            nearest = std::min(nearest, (p - m.position_rig_mm).norm());
+        EXPECT_LT(nearest, 1e-6);
+        EXPECT_LT(m.rayGap_mm, 1e-6f);
+    }
+}
+
+TEST(StereoMatcher, SharedEpipolarLinesFoolTheBaselineNotTheSvd) {
+    // Six pairs of markers; the two of a pair share an epipolar line (0.2 mm apart in height) at
+    // different depths, so each blob of camera 0 has two candidates in camera 1, as in the
+    // paper's Figure 6. Only the neighbourhood term can tell them apart.
+    std::mt19937 random(11);
+    std::uniform_real_distribution<double> wobble(-0.2, 0.2);
+    std::vector<Vec3> points;
+    for (int pair = 0; pair < 6; ++pair) {
+        const double row = -75.0 + 30.0 * pair;
+        const double x = 20.0 + 15.0 * (pair % 3);
+        points.emplace_back(x, row, 540.0 + 10.0 * pair);
+        points.emplace_back(x + 45.0 + 5.0 * pair, row + wobble(random), 600.0 - 6.0 * pair);
+    }
+    const BlobSets sets = project(points);
+    StereoMatcher matcher(simRig(), StereoConfig{}, 64);
+    BoundedVector<StereoMarker> svd(64), baseline(64);
+    matcher.match(sets.camera[0], sets.camera[1], svd);
+    matcher.matchEpipolarOnly(sets.camera[0], sets.camera[1], baseline);
+    auto falseMarkers = [&](const BoundedVector<StereoMarker>& markers) {
+        int count = 0;
+        for (const StereoMarker& m : markers) {
+            double nearest = 1e9;
+            for (const Vec3& p : points)
+                nearest = std::min(nearest, (p - m.position_rig_mm).norm());
+            count += nearest > 0.01 ? 1 : 0;
+        }
+        return count;
+    };
+    EXPECT_EQ(svd.size(), points.size());
+    EXPECT_EQ(falseMarkers(svd), 0);
+    EXPECT_GE(falseMarkers(baseline), 6);
+}
+
+TEST(StereoMatcher, BlobSeenByOneCameraOnlyMakesNoMarker) {
+    std::vector<Vec3> points = randomMarkers(10, 3);
+    BlobSets sets = project(points);
+    Blob lonely;
+    lonely.centre_px = {50.0, 60.0};
+    sets.camera[0].push_back(lonely);
+    StereoMatcher matcher(simRig(), StereoConfig{}, 64);
+    BoundedVector<StereoMarker> markers(64);
+    matcher.match(sets.camera[0], sets.camera[1], markers);
+    EXPECT_EQ(markers.size(), 10u);
+}
+
+TEST(StereoMatcher, MarkerOverflowIsCounted) {
+    const BlobSets sets = project(randomMarkers(30, 4));
+    StereoConfig config;
+    config.maxMarkers = 10;
+    StereoMatcher matcher(simRig(), config, 64);
+    BoundedVector<StereoMarker> markers(config.maxMarkers);
+    matcher.match(sets.camera[0], sets.camera[1], markers);
+    EXPECT_EQ(markers.size(), 10u);
+    EXPECT_EQ(matcher.counters().markerOverflow, 20u);
+}
+
+TEST(StereoMatcher, MatchingDoesNotAllocate) {
+    const BlobSets sets = project(randomMarkers(60, 5), 0.2);
+    StereoMatcher matcher(simRig(), StereoConfig{}, 256);
+    BoundedVector<StereoMarker> markers(256);
+    matcher.match(sets.camera[0], sets.camera[1], markers); // warm-up
+    const auto count = test::countAllocations([&] {
+        for (int i = 0; i < 100; ++i)
+            matcher.match(sets.camera[0], sets.camera[1], markers);
+    });
+    EXPECT_EQ(count, 0u);
+    EXPECT_EQ(markers.size(), 60u);
+}
