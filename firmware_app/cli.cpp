@@ -8,6 +8,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "firmware_app/reconstruct_command.hpp"
 #include "firmware_app/recording/recording.hpp"
 #include "firmware_app/sim_command.hpp"
 
@@ -161,8 +162,18 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
             << sim.level << " level, seed " << sim.seed << ") to " << sim.out << "\n";
         return 0;
     }
-    if (reconstructCommand->parsed())
-        return notBuilt(err, "reconstruct", 4);
+    if (reconstructCommand->parsed()) {
+        ReconstructOptions options;
+        options.input = reconstruct.input;
+        options.out = reconstruct.out;
+        if (!reconstruct.from.empty())
+            options.from = recording::parseLevel(reconstruct.from);
+        if (Status s = runReconstruct(options, out); !s) {
+            err << "edgetrack reconstruct: " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        return 0;
+    }
     if (calibrateCommand->parsed())
         return notBuilt(err, "calibrate", 5);
     if (trackCommand->parsed())

@@ -1,0 +1,140 @@
+// Benchmarks of marker tracking on one core: blob detection of a 1280x800 frame pair beside the
+// memory floor and OpenCV, and stereo plus frame-to-frame correspondence for about 60 markers.
+#include <cstdint>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+
+#include "core/blob_detector.hpp"
+#include "core/marker_tracker.hpp"
+#include "core/simd/neon.hpp"
+#include "core/stereo_matcher.hpp"
+#include "hal/sim/world.hpp"
+
+#if EDGETRACK_HAVE_OPENCV
+#include <opencv2/imgproc.hpp>
+#endif
+
+namespace {
+
+using namespace edgetrack;
+
+// One frame pair of a simulated scene, rendered once.
+struct FramePair {
+    sim::World world;
+    std::vector<std::uint8_t> image[2];
+    sim::Observation observation;
+
+    FramePair(const char* scene, std::uint64_t frame)
+        : world(*sim::makeScene(scene, 1), 1) {
+        const sim::RigSpec& rig = world.scene().rig;
+        const sim::FrameRenderer renderer(rig.width_px, rig.height_px, world.scene().background_dn,
+                                          world.scene().noiseSigma_dn, 1);
+        world.observe(frame, observation);
+        for (int c = 0; c < 2; ++c) {
+            image[c].resize(static_cast<std::size_t>(rig.width_px * rig.height_px));
+            renderer.render(image[c], rig.width_px, c, observation, 1.0, frame);
+        }
+    }
+    int width() const { return world.scene().rig.width_px; }
+    int height() const { return world.scene().rig.height_px; }
+    std::int64_t bytes() const { return static_cast<std::int64_t>(2 * image[0].size()); }
+};
+
+const FramePair& twoCubes() {
+    static const FramePair pair("two_cubes", 120);
+    return pair;
+}
+
+void BM_BlobDetectionPair(benchmark::State& state) {
+    const FramePair& pair = twoCubes();
+    BlobDetector detector(BlobDetectorConfig{}, pair.width(), pair.height());
+    BoundedVector<Blob> blobs(256);
+    for (auto _ : state) {
+        for (int c = 0; c < 2; ++c) {
+            detector.detect(pair.image[c].data(), pair.width(), blobs);
+            benchmark::DoNotOptimize(blobs.data());
+        }
+    }
+    state.SetBytesProcessed(state.iterations() * pair.bytes());
+    state.counters["blobs"] = static_cast<double>(blobs.size());
+    state.SetLabel(simd::neonBackendName());
+}
+BENCHMARK(BM_BlobDetectionPair)->Unit(benchmark::kMicrosecond);
+
+// The memory floor: every byte loaded once and reduced with the cheapest NEON operation.
+void BM_PlainReadPair(benchmark::State& state) {
+    const FramePair& pair = twoCubes();
+    for (auto _ : state) {
+        for (int c = 0; c < 2; ++c) {
+            const std::uint8_t* p = pair.image[c].data();
+            uint8x16_t m0 = vdupq_n_u8(0), m1 = m0, m2 = m0, m3 = m0;
+            for (std::size_t i = 0; i + 64 <= pair.image[c].size(); i += 64) {
+                m0 = vmaxq_u8(m0, vld1q_u8(p + i));
+                m1 = vmaxq_u8(m1, vld1q_u8(p + i + 16));
+                m2 = vmaxq_u8(m2, vld1q_u8(p + i + 32));
+                m3 = vmaxq_u8(m3, vld1q_u8(p + i + 48));
+            }
+            benchmark::DoNotOptimize(vmaxvq_u8(vmaxq_u8(vmaxq_u8(m0, m1), vmaxq_u8(m2, m3))));
+        }
+    }
+    state.SetBytesProcessed(state.iterations() * pair.bytes());
+}
+BENCHMARK(BM_PlainReadPair)->Unit(benchmark::kMicrosecond);
+
+#if EDGETRACK_HAVE_OPENCV
+// The usual way: threshold, then connected components with statistics.
+void BM_OpenCvPair(benchmark::State& state) {
+    const FramePair& pair = twoCubes();
+    cv::setNumThreads(0); // one core, like ours
+    cv::Mat binary, labels, stats, centroids;
+    for (auto _ : state) {
+        for (int c = 0; c < 2; ++c) {
+            const cv::Mat image(pair.height(), pair.width(), CV_8UC1,
+                                const_cast<std::uint8_t*>(pair.image[c].data()));
+            cv::threshold(image, binary, 59, 255, cv::THRESH_BINARY);
+            const int n =
+                cv::connectedComponentsWithStats(binary, labels, stats, centroids, 8, CV_32S);
+            benchmark::DoNotOptimize(n);
+        }
+    }
+    state.SetBytesProcessed(state.iterations() * pair.bytes());
+}
+BENCHMARK(BM_OpenCvPair)->Unit(benchmark::kMicrosecond);
+#endif
+
+// Stereo and frame-to-frame correspondence of the crowd scene (six objects, 69 markers in frame
+// 650 and its successor).
+void BM_StereoAndFrameToFrame(benchmark::State& state) {
+    static const FramePair first("crowd", 650);
+    static const FramePair second("crowd", 651);
+    BlobDetector detector(BlobDetectorConfig{}, first.width(), first.height());
+    BoundedVector<Blob> blobs[2][2] = {{BoundedVector<Blob>(256), BoundedVector<Blob>(256)},
+                                       {BoundedVector<Blob>(256), BoundedVector<Blob>(256)}};
+    for (int c = 0; c < 2; ++c) {
+        detector.detect(first.image[c].data(), first.width(), blobs[0][c]);
+        detector.detect(second.image[c].data(), second.width(), blobs[1][c]);
+    }
+    StereoMatcher stereo(first.world.rig(), StereoConfig{}, 256);
+    MarkerTracker tracker{FrameToFrameConfig{}};
+    BoundedVector<StereoMarker> markers(256);
+    BoundedVector<Vec3> points(256);
+    double time_s = 0.0;
+    std::size_t frame = 0;
+    for (auto _ : state) {
+        const auto& pair = blobs[frame % 2];
+        stereo.match(pair[0].span(), pair[1].span(), markers);
+        points.clear();
+        for (const StereoMarker& m : markers)
+            points.push_back(m.position_rig_mm);
+        benchmark::DoNotOptimize(tracker.update(time_s, points.span()).data());
+        time_s += 0.01;
+        ++frame;
+    }
+    state.counters["markers"] = static_cast<double>(markers.size());
+}
+BENCHMARK(BM_StereoAndFrameToFrame)->Unit(benchmark::kMicrosecond);
+
+} // namespace
+
+BENCHMARK_MAIN();
