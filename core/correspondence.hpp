@@ -67,9 +67,10 @@ public:
         const Eigen::Index rows = proximity.rows(), cols = proximity.cols();
         if (rows == 0 || cols == 0)
             return;
-        if (rows == 1 && cols == 1) {
-            if (proximity(0, 0) >= minProximity)
-                accept(0, 0);
+        if (rows == 1 || cols == 1) {
+            // A single row or column is its own rank-one SVD: U V^T is G scaled by 1 / |G|, so
+            // the SVD would pick the same maxima as G itself.
+            acceptMutualMaxima(proximity, proximity, minProximity, accept);
             return;
         }
         svd_.compute(proximity, Eigen::ComputeThinU | Eigen::ComputeThinV);

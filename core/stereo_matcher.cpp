@@ -3,8 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 
+#include "core/simd/neon.hpp"
 #include "core/triangulation.hpp"
 
 namespace edgetrack {
@@ -14,6 +16,53 @@ constexpr std::size_t idx(int i) {
     return static_cast<std::size_t>(i);
 }
 constexpr std::size_t kMaxNeighbours = 32;
+
+// A blob's neighbourhood in region R as separate x and y arrays of offsets (rectified px), padded
+// to whole NEON vectors with far-away points that never win a minimum.
+struct Neighbourhood {
+    static constexpr float kFar = 1e9f;
+    std::size_t count = 0;
+    alignas(16) float x[kMaxNeighbours];
+    alignas(16) float y[kMaxNeighbours];
+
+    void clear() { count = 0; }
+    void add(const Vec2& offset) {
+        if (count == kMaxNeighbours)
+            return; // a crowded region keeps its first 32
+        x[count] = static_cast<float>(offset.x());
+        y[count] = static_cast<float>(offset.y());
+        ++count;
+    }
+    void pad() {
+        for (std::size_t i = count; i % 4 != 0; ++i)
+            x[i] = y[i] = kFar;
+    }
+    std::size_t paddedCount() const { return (count + 3) & ~std::size_t{3}; }
+};
+
+// Eq. 2: mean over the smaller set of the distance to the closest point of the larger set.
+// Four points of the smaller set are handled at once against each point of the larger set, so
+// there is no horizontal minimum at all.
+double meanClosestDistance(const Neighbourhood& smaller, const Neighbourhood& larger) {
+    float sum = 0.0f;
+    for (std::size_t k = 0; k < smaller.count; k += 4) {
+        const float32x4_t qx = vld1q_f32(smaller.x + k);
+        const float32x4_t qy = vld1q_f32(smaller.y + k);
+        float32x4_t closest = vdupq_n_f32(Neighbourhood::kFar);
+        for (std::size_t i = 0; i < larger.count; ++i) {
+            const float32x4_t dx = vsubq_f32(vdupq_n_f32(larger.x[i]), qx);
+            const float32x4_t dy = vsubq_f32(vdupq_n_f32(larger.y[i]), qy);
+            closest = vminq_f32(closest, vmlaq_f32(vmulq_f32(dx, dx), dy, dy));
+        }
+        // Padding lanes of the smaller set (beyond its count) must not count.
+        alignas(16) float squared[4];
+        vst1q_f32(squared, closest);
+        const std::size_t valid = std::min<std::size_t>(4, smaller.count - k);
+        for (std::size_t lane = 0; lane < valid; ++lane)
+            sum += std::sqrt(squared[lane]);
+    }
+    return static_cast<double>(sum) / static_cast<double>(smaller.count);
+}
 } // namespace
 
 // Per-blob data of one frame, for both cameras, in storage sized once.
@@ -24,7 +73,10 @@ struct StereoMatcher::Prepared {
             pixel[c] = std::make_unique<Vec2[]>(maxBlobs);
             rays[c] = std::make_unique<Ray[]>(maxBlobs);
             valid[c] = std::make_unique<bool[]>(maxBlobs);
-            neighbours[c] = std::make_unique<FixedVector<Vec2, kMaxNeighbours>[]>(maxBlobs);
+            neighbours[c] = std::make_unique<Neighbourhood[]>(maxBlobs);
+            byRow[c] = std::make_unique<int[]>(maxBlobs);
+            sortedX[c] = std::make_unique<double[]>(maxBlobs);
+            sortedY[c] = std::make_unique<double[]>(maxBlobs);
         }
     }
     std::size_t count[2] = {0, 0};
@@ -33,7 +85,27 @@ struct StereoMatcher::Prepared {
     std::unique_ptr<Ray[]> rays[2];
     std::unique_ptr<bool[]> valid[2];
     /// Offsets of the other blobs of the same camera inside region R (rectified px).
-    std::unique_ptr<FixedVector<Vec2, kMaxNeighbours>[]> neighbours[2];
+    std::unique_ptr<Neighbourhood[]> neighbours[2];
+    /// Valid blobs sorted by rectified y, so that bands and regions are found by bisection.
+    std::unique_ptr<int[]> byRow[2];
+    /// Rectified x and y in byRow order, side by side for the scans.
+    std::unique_ptr<double[]> sortedX[2];
+    std::unique_ptr<double[]> sortedY[2];
+    std::size_t validCount[2] = {0, 0};
+
+    double rowOf(int camera, int sorted) const { return sortedY[camera][idx(sorted)]; }
+    /// First position in byRow[camera] whose rectified y is >= \a y.
+    int lowerBound(int camera, double y) const {
+        int low = 0, high = static_cast<int>(validCount[camera]);
+        while (low < high) {
+            const int mid = (low + high) / 2;
+            if (rowOf(camera, mid) < y)
+                low = mid + 1;
+            else
+                high = mid;
+        }
+        return low;
+    }
 };
 
 StereoMatcher::StereoMatcher(const StereoRig& rig, const StereoConfig& config,
@@ -77,25 +149,49 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
             p.rectified[c][i] = *rectified;
             p.valid[c][i] = true;
         }
+        std::size_t valid = 0;
+        for (std::size_t i = 0; i < p.count[c]; ++i)
+            if (p.valid[c][i])
+                p.byRow[c][valid++] = static_cast<int>(i);
+        p.validCount[c] = valid;
+        const Vec2* rectifiedOf = p.rectified[c].get();
+        std::sort(p.byRow[c].get(), p.byRow[c].get() + valid, [rectifiedOf](int a, int b) {
+            return rectifiedOf[idx(a)].y() < rectifiedOf[idx(b)].y();
+        });
+        for (std::size_t k = 0; k < valid; ++k) {
+            p.sortedX[c][k] = rectifiedOf[idx(p.byRow[c][k])].x();
+            p.sortedY[c][k] = rectifiedOf[idx(p.byRow[c][k])].y();
+        }
         collectNeighbours(c);
     }
 }
 
 void StereoMatcher::collectNeighbours(int camera) {
+    // Region R: the blobs within half of S in x and y. Scanning outward from the blob's own row
+    // keeps the nearest rows first when a crowded region holds more than the list can.
     Prepared& p = *prepared_;
     const double half = 0.5 * config_.neighbourhood_px;
-    const std::size_t n = p.count[camera];
-    for (std::size_t i = 0; i < n; ++i) {
+    const int valid = static_cast<int>(p.validCount[camera]);
+    for (std::size_t i = 0; i < p.count[camera]; ++i)
         p.neighbours[camera][i].clear();
-        if (!p.valid[camera][i])
-            continue;
-        for (std::size_t k = 0; k < n; ++k) {
-            if (k == i || !p.valid[camera][k])
-                continue;
-            const Vec2 offset = p.rectified[camera][k] - p.rectified[camera][i];
-            if (std::abs(offset.x()) < half && std::abs(offset.y()) < half)
-                p.neighbours[camera][i].push_back(offset); // a crowded region keeps the first 32
+    const double* xs = p.sortedX[camera].get();
+    const double* ys = p.sortedY[camera].get();
+    for (int s = 0; s < valid; ++s) {
+        Neighbourhood& list = p.neighbours[camera][idx(p.byRow[camera][idx(s)])];
+        const double x = xs[s], y = ys[s];
+        int up = s - 1, down = s + 1;
+        while (true) {
+            const double dyUp = up >= 0 ? y - ys[up] : std::numeric_limits<double>::infinity();
+            const double dyDown =
+                down < valid ? ys[down] - y : std::numeric_limits<double>::infinity();
+            if (std::min(dyUp, dyDown) >= half)
+                break;
+            const int k = dyUp <= dyDown ? up-- : down++;
+            const double dx = xs[k] - x;
+            if (std::abs(dx) < half)
+                list.add({dx, ys[k] - y});
         }
+        list.pad();
     }
 }
 
@@ -111,33 +207,24 @@ bool StereoMatcher::inBand(int i, int j) const {
 }
 
 double StereoMatcher::neighbourhoodDistance(int i, int j) const {
-    // Eq. 2: mean distance from each point of the smaller neighbourhood to the closest point of
-    // the larger one, both translated so that the candidate pair sits at the origin.
-    const auto& a = prepared_->neighbours[0][idx(i)];
-    const auto& b = prepared_->neighbours[1][idx(j)];
-    const auto& smaller = a.size() <= b.size() ? a : b;
-    const auto& larger = a.size() <= b.size() ? b : a;
-    if (smaller.empty())
+    // Both neighbourhoods are translated so that the candidate pair sits at the origin.
+    const Neighbourhood& a = prepared_->neighbours[0][idx(i)];
+    const Neighbourhood& b = prepared_->neighbours[1][idx(j)];
+    const Neighbourhood& smaller = a.count <= b.count ? a : b;
+    const Neighbourhood& larger = a.count <= b.count ? b : a;
+    if (smaller.count == 0)
         return 0.0;
-    double sum = 0.0;
-    for (const Vec2& q : smaller) {
-        double closest = std::numeric_limits<double>::infinity();
-        for (const Vec2& r : larger)
-            closest = std::min(closest, (q - r).squaredNorm());
-        sum += std::sqrt(closest);
-    }
-    return sum / static_cast<double>(smaller.size());
+    return meanClosestDistance(smaller, larger);
 }
 
 double StereoMatcher::proximity(int i, int j) const {
     if (!inBand(i, j))
         return 0.0;
+    // Eq. 4: g_epi (eq. 1) times the neighbourhood term, as one exponential.
     const double dy = prepared_->rectified[0][idx(i)].y() - prepared_->rectified[1][idx(j)].y();
-    const double epipolar =
-        std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px));
     const double d = neighbourhoodDistance(i, j);
-    return epipolar *
-           std::exp(-d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px));
+    return std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px) -
+                    d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px));
 }
 
 void StereoMatcher::mutualBestOfLargeBlock(std::span<const int> rows, std::span<const int> cols,
@@ -166,10 +253,17 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
     pairs.clear();
     const Prepared& p = *prepared_;
     blocks_.reset(p.count[0], p.count[1]);
-    for (std::size_t i = 0; i < p.count[0]; ++i)
-        for (std::size_t j = 0; j < p.count[1]; ++j)
-            if (inBand(static_cast<int>(i), static_cast<int>(j)))
-                blocks_.link(i, j);
+    // Only camera 1 blobs within the epipolar band of a camera 0 blob can link to it.
+    for (std::size_t s = 0; s < p.validCount[0]; ++s) {
+        const int i = p.byRow[0][s];
+        const double y = p.rectified[0][idx(i)].y();
+        for (int t = p.lowerBound(1, y - band_px_);
+             t < static_cast<int>(p.validCount[1]) && p.rowOf(1, t) <= y + band_px_; ++t) {
+            const int j = p.byRow[1][idx(t)];
+            if (inBand(i, j))
+                blocks_.link(idx(i), idx(j));
+        }
+    }
     blocks_.build();
 
     for (std::size_t b = 0; b < blocks_.blockCount(); ++b) {
