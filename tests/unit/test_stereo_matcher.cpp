@@ -7,8 +7,10 @@
 #include <gtest/gtest.h>
 
 #include "core/correspondence.hpp"
+#include "core/marker_tracker.hpp"
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/scene.hpp"
+#include "hal/sim/world.hpp"
 #include "tests/support/alloc_guard.hpp"
 
 using namespace edgetrack;
@@ -198,4 +200,48 @@ TEST(StereoMatcher, MatchingDoesNotAllocate) {
     });
     EXPECT_EQ(count, 0u);
     EXPECT_EQ(markers.size(), 60u);
+}
+
+TEST(MarkerTrackingPipeline, ThousandFramesWithoutAllocating) {
+    // Blob detection, stereo and frame-to-frame over 1,000 frames of a rendered scene.
+    const sim::World world(*sim::makeScene("two_cubes", 3), 3);
+    const sim::RigSpec& rig = world.scene().rig;
+    const sim::FrameRenderer renderer(rig.width_px, rig.height_px, 10.0, 2.0, 3);
+    constexpr int kRendered = 8;
+    std::vector<std::vector<std::uint8_t>> images(2 * kRendered);
+    sim::Observation observation;
+    for (int f = 0; f < kRendered; ++f) {
+        world.observe(static_cast<std::uint64_t>(f), observation);
+        for (int c = 0; c < 2; ++c) {
+            auto& image = images[static_cast<std::size_t>(2 * f + c)];
+            image.resize(static_cast<std::size_t>(rig.width_px * rig.height_px));
+            renderer.render(image, rig.width_px, c, observation, 1.0,
+                            static_cast<std::uint64_t>(f));
+        }
+    }
+    const BlobDetectorConfig blobConfig;
+    BlobDetector detector(blobConfig, rig.width_px, rig.height_px);
+    StereoMatcher stereo(world.rig(), StereoConfig{}, blobConfig.maxBlobs);
+    MarkerTracker tracker{FrameToFrameConfig{}};
+    BoundedVector<Blob> blobs0(blobConfig.maxBlobs), blobs1(blobConfig.maxBlobs);
+    BoundedVector<StereoMarker> markers(256);
+    BoundedVector<Vec3> points(256);
+    auto frame = [&](int f) {
+        const auto k = static_cast<std::size_t>(f % kRendered);
+        detector.detect(images[2 * k].data(), rig.width_px, blobs0);
+        detector.detect(images[2 * k + 1].data(), rig.width_px, blobs1);
+        stereo.match(blobs0.span(), blobs1.span(), markers);
+        points.clear();
+        for (const StereoMarker& m : markers)
+            points.push_back(m.position_rig_mm);
+        tracker.update(f * 0.01, points.span());
+    };
+    for (int f = 0; f < 20; ++f)
+        frame(f); // warm-up
+    const auto allocations = test::countAllocations([&] {
+        for (int f = 20; f < 1020; ++f)
+            frame(f);
+    });
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_GT(markers.size(), 10u);
 }
