@@ -15,9 +15,9 @@ namespace edgetrack {
 /// \brief Tuning of frame-to-frame correspondence; defaults suit hand motion at 100 Hz.
 struct FrameToFrameConfig {
     /// sigma_t of eq. 5: expected error of the predicted position (mm).
-    double sigma_mm = 3.0;
+    double sigma_mm = 5.0;
     /// Proximity is exactly zero beyond this distance from the prediction (mm); bounds the blocks.
-    double gate_mm = 12.0;
+    double gate_mm = 15.0;
     /// A correspondence needs at least this proximity.
     double minProximity = 1e-4;
     /// With a longer gap between frames (s) the velocity is not trusted for prediction.

@@ -64,6 +64,9 @@ int main(int argc, char** argv) {
     app.add_option("--sigma-similarity", stereoConfig.sigmaSimilarity_px,
                    "sigma_sim of eq. 4 (px)");
     app.add_option("--region", stereoConfig.neighbourhood_px, "S, side of region R (px)");
+    FrameToFrameConfig trackConfig;
+    app.add_option("--sigma-t", trackConfig.sigma_mm, "sigma_t of eq. 5 (mm)");
+    app.add_option("--gate", trackConfig.gate_mm, "frame-to-frame gate (mm)");
     CLI11_PARSE(app, argc, argv);
 
     std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
@@ -80,7 +83,7 @@ int main(int argc, char** argv) {
     BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
     BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
     StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
-    MarkerTracker tracker{FrameToFrameConfig{}};
+    MarkerTracker tracker(trackConfig);
 
     std::vector<std::uint8_t> image0(
         static_cast<std::size_t>(rigSpec.width_px * rigSpec.height_px));
