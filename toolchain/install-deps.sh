@@ -16,6 +16,7 @@ host_packages=(
     build-essential cmake ninja-build pkg-config git clang-format
     libeigen3-dev libtomlplusplus-dev libcli11-dev libsimde-dev
     zlib1g-dev libsystemd-dev
+    libopencv-imgproc-dev
     libgtest-dev libgmock-dev libbenchmark-dev
 )
 
