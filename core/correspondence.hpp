@@ -102,4 +102,55 @@ private:
     ProximityBlock orthogonal_;
 };
 
+/**
+ * \brief Solves the blocks of a BipartiteBlocks split with a proximity given as a function of the
+ * elements' own indices: SVD for blocks up to kMaxCorrespondenceBlock, mutual best proximity
+ * (counted by the caller) for larger ones. Owns its fixed-size scratch, so it never allocates.
+ */
+class BlockSolver {
+public:
+    /**
+     * \brief Pair the elements of one block.
+     * \param proximity (left, right) -> G, with the elements' own indices.
+     * \param accept called with (left, right) for each accepted pair.
+     * \return false when the block was too big for the SVD and the fallback paired it.
+     */
+    template <typename Proximity, typename Accept>
+    bool solve(std::span<const int> left, std::span<const int> right, double minProximity,
+               Proximity&& proximity, Accept&& accept) {
+        constexpr auto kMax = static_cast<std::size_t>(kMaxCorrespondenceBlock);
+        if (left.size() > kMax || right.size() > kMax) {
+            for (const int l : left) {
+                int best = -1;
+                double bestProximity = minProximity;
+                for (const int r : right)
+                    if (const double g = proximity(l, r); g >= bestProximity) {
+                        bestProximity = g;
+                        best = r;
+                    }
+                bool mutual = best >= 0;
+                for (const int other : left)
+                    mutual = mutual && (other == l || proximity(other, best) <= bestProximity);
+                if (mutual)
+                    accept(l, best);
+            }
+            return false;
+        }
+        block_.resize(static_cast<Eigen::Index>(left.size()),
+                      static_cast<Eigen::Index>(right.size()));
+        for (std::size_t r = 0; r < left.size(); ++r)
+            for (std::size_t c = 0; c < right.size(); ++c)
+                block_(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) =
+                    proximity(left[r], right[c]);
+        solver_.solve(block_, minProximity, [&](int r, int c) {
+            accept(left[static_cast<std::size_t>(r)], right[static_cast<std::size_t>(c)]);
+        });
+        return true;
+    }
+
+private:
+    SlhSolver solver_;
+    ProximityBlock block_;
+};
+
 } // namespace edgetrack

@@ -62,36 +62,11 @@ std::span<const TrackedMarker> MarkerTracker::update(double time_s, std::span<co
         return d2 <= gate2 ? std::exp(-d2 / twoSigma2) : 0.0;
     };
     for (std::size_t b = 0; b < blocks_.blockCount(); ++b) {
-        const std::span<const int> rows = blocks_.leftOf(b);
-        const std::span<const int> cols = blocks_.rightOf(b);
-        if (rows.size() > static_cast<std::size_t>(kMaxCorrespondenceBlock) ||
-            cols.size() > static_cast<std::size_t>(kMaxCorrespondenceBlock)) {
-            // Only a pathological cloud gets here; nearest mutual neighbours still pair most.
+        const bool solved =
+            solver_.solve(blocks_.leftOf(b), blocks_.rightOf(b), config_.minProximity, proximity,
+                          [this](int i, int j) { matchOf_[idx(i)] = j; });
+        if (!solved)
             ++counters_.blockOverflow;
-            for (const int r : rows) {
-                int best = -1;
-                double bestG = config_.minProximity;
-                for (const int c : cols)
-                    if (const double g = proximity(r, c); g >= bestG) {
-                        bestG = g;
-                        best = c;
-                    }
-                bool mutual = best >= 0;
-                for (const int other : rows)
-                    mutual = mutual && (other == r || proximity(other, best) <= bestG);
-                if (mutual)
-                    matchOf_[idx(r)] = best;
-            }
-            continue;
-        }
-        block_.resize(static_cast<Eigen::Index>(rows.size()),
-                      static_cast<Eigen::Index>(cols.size()));
-        for (std::size_t r = 0; r < rows.size(); ++r)
-            for (std::size_t c = 0; c < cols.size(); ++c)
-                block_(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) =
-                    proximity(rows[r], cols[c]);
-        solver_.solve(block_, config_.minProximity,
-                      [&](int r, int c) { matchOf_[idx(rows[idx(r)])] = cols[idx(c)]; });
     }
 
     for (std::size_t i = 0; i < count; ++i) {

@@ -75,8 +75,7 @@ private:
     BoundedVector<Vec3> predicted_;
     BoundedVector<int> matchOf_;
     BipartiteBlocks blocks_;
-    SlhSolver solver_;
-    ProximityBlock block_;
+    BlockSolver solver_;
     double previousTime_s_ = 0.0;
     bool havePrevious_ = false;
     std::uint32_t nextId_ = 1;

@@ -227,28 +227,6 @@ double StereoMatcher::proximity(int i, int j) const {
                     d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px));
 }
 
-void StereoMatcher::mutualBestOfLargeBlock(std::span<const int> rows, std::span<const int> cols,
-                                           BoundedVectorView<IndexPair>& pairs) {
-    // Too big for the fixed-size SVD: pair rows and columns that are each other's best.
-    for (const int r : rows) {
-        int bestCol = -1;
-        double best = config_.minProximity;
-        for (const int c : cols)
-            if (const double g = proximity(r, c); g >= best) {
-                best = g;
-                bestCol = c;
-            }
-        if (bestCol < 0)
-            continue;
-        bool mutual = true;
-        for (const int other : rows)
-            if (other != r && proximity(other, bestCol) > best)
-                mutual = false;
-        if (mutual)
-            pairs.push_back({r, bestCol});
-    }
-}
-
 void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
     pairs.clear();
     const Prepared& p = *prepared_;
@@ -272,21 +250,13 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
         ++counters_.blocks;
         counters_.largestBlock =
             std::max<std::uint64_t>(counters_.largestBlock, std::max(rows.size(), cols.size()));
-        if (rows.size() > static_cast<std::size_t>(kMaxCorrespondenceBlock) ||
-            cols.size() > static_cast<std::size_t>(kMaxCorrespondenceBlock)) {
+        const bool solved = solver_.solve(
+            rows, cols, config_.minProximity, [this](int i, int j) { return proximity(i, j); },
+            [&pairs](int i, int j) {
+                pairs.push_back({i, j});
+            });
+        if (!solved)
             ++counters_.blockOverflow;
-            mutualBestOfLargeBlock(rows, cols, pairs);
-            continue;
-        }
-        block_.resize(static_cast<Eigen::Index>(rows.size()),
-                      static_cast<Eigen::Index>(cols.size()));
-        for (std::size_t r = 0; r < rows.size(); ++r)
-            for (std::size_t c = 0; c < cols.size(); ++c)
-                block_(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) =
-                    proximity(rows[r], cols[c]);
-        solver_.solve(block_, config_.minProximity, [&](int r, int c) {
-            pairs.push_back({rows[idx(r)], cols[idx(c)]});
-        });
     }
     counters_.correspondences += pairs.size();
 }

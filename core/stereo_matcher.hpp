@@ -109,8 +109,6 @@ private:
     double neighbourhoodDistance(int i, int j) const;
     void collectNeighbours(int camera);
     void triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out);
-    void mutualBestOfLargeBlock(std::span<const int> rows, std::span<const int> cols,
-                                BoundedVectorView<IndexPair>& pairs);
 
     StereoRig rig_;
     StereoConfig config_;
@@ -123,8 +121,7 @@ private:
 
     std::unique_ptr<Prepared> prepared_;
     BipartiteBlocks blocks_;
-    SlhSolver solver_;
-    ProximityBlock block_;
+    BlockSolver solver_;
     BoundedVector<IndexPair> pairs_;
 };
 

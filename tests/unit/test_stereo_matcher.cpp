@@ -1,5 +1,6 @@
 // Tests of stereo correspondence: block solution equals the full-matrix SVD, markers are exact,
 // the epipolar-only baseline makes false markers that SVD matching avoids.
+#include <numeric>
 #include <random>
 #include <set>
 
@@ -244,4 +245,31 @@ TEST(MarkerTrackingPipeline, ThousandFramesWithoutAllocating) {
     });
     EXPECT_EQ(allocations, 0u);
     EXPECT_GT(markers.size(), 10u);
+}
+
+TEST(BlockSolver, OversizedBlockFallsBackToMutualBest) {
+    // 60 x 60 is past the SVD's fixed size: pairs still come out, and the fallback is reported.
+    std::vector<int> left(60), right(60);
+    std::iota(left.begin(), left.end(), 0);
+    std::iota(right.begin(), right.end(), 0);
+    auto proximity = [](int i, int j) { return i == (j + 7) % 60 ? 0.9 : 0.01 / (1 + i + j); };
+    BlockSolver solver;
+    std::vector<std::pair<int, int>> pairs;
+    const bool solved =
+        solver.solve(left, right, 1e-3, proximity, [&](int i, int j) { pairs.emplace_back(i, j); });
+    EXPECT_FALSE(solved);
+    ASSERT_EQ(pairs.size(), 60u);
+    for (const auto& [i, j] : pairs)
+        EXPECT_EQ(i, (j + 7) % 60);
+
+    // A small block of the same kind goes through the SVD and agrees.
+    std::vector<int> few(6);
+    std::iota(few.begin(), few.end(), 0);
+    pairs.clear();
+    auto small = [](int i, int j) { return i == (j + 2) % 6 ? 0.9 : 0.05; };
+    EXPECT_TRUE(
+        solver.solve(few, few, 1e-3, small, [&](int i, int j) { pairs.emplace_back(i, j); }));
+    ASSERT_EQ(pairs.size(), 6u);
+    for (const auto& [i, j] : pairs)
+        EXPECT_EQ(i, (j + 2) % 6);
 }
