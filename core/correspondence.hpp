@@ -2,6 +2,7 @@
 // block.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -72,6 +73,20 @@ public:
             // the SVD would pick the same maxima as G itself.
             acceptMutualMaxima(proximity, proximity, minProximity, accept);
             return;
+        }
+        if (rows == 2 && cols == 2) {
+            // The orthogonal polar factor of a non-singular 2x2 block in closed form:
+            // G + sign(det G) adj(G)^T is a multiple of U V^T.
+            const double a = proximity(0, 0), b = proximity(0, 1);
+            const double c = proximity(1, 0), d = proximity(1, 1);
+            const double det = a * d - b * c;
+            if (std::abs(det) > 1e-12 * (a * a + b * b + c * c + d * d)) {
+                const double sign = det > 0.0 ? 1.0 : -1.0;
+                Eigen::Matrix2d polar;
+                polar << a + sign * d, b - sign * c, c - sign * b, d + sign * a;
+                acceptMutualMaxima(polar, proximity, minProximity, accept);
+                return;
+            }
         }
         svd_.compute(proximity, Eigen::ComputeThinU | Eigen::ComputeThinV);
         orthogonal_.noalias() = svd_.matrixU() * svd_.matrixV().transpose();

@@ -167,8 +167,8 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
 }
 
 void StereoMatcher::collectNeighbours(int camera) {
-    // Region R: the blobs within half of S in x and y. Scanning outward from the blob's own row
-    // keeps the nearest rows first when a crowded region holds more than the list can.
+    // Region R: the blobs within half of S in x and y; when a crowded region holds more than the
+    // list can, the nearest rows are kept.
     Prepared& p = *prepared_;
     const double half = 0.5 * config_.neighbourhood_px;
     const int valid = static_cast<int>(p.validCount[camera]);
@@ -179,17 +179,36 @@ void StereoMatcher::collectNeighbours(int camera) {
     for (int s = 0; s < valid; ++s) {
         Neighbourhood& list = p.neighbours[camera][idx(p.byRow[camera][idx(s)])];
         const double x = xs[s], y = ys[s];
-        int up = s - 1, down = s + 1;
-        while (true) {
-            const double dyUp = up >= 0 ? y - ys[up] : std::numeric_limits<double>::infinity();
-            const double dyDown =
-                down < valid ? ys[down] - y : std::numeric_limits<double>::infinity();
-            if (std::min(dyUp, dyDown) >= half)
-                break;
-            const int k = dyUp <= dyDown ? up-- : down++;
+        // The rows of region R form one stretch of the sorted order; take it in one sweep.
+        int first = s;
+        while (first > 0 && y - ys[first - 1] < half)
+            --first;
+        bool crowded = false;
+        for (int k = first; k < valid && ys[k] - y < half; ++k) {
             const double dx = xs[k] - x;
-            if (std::abs(dx) < half)
-                list.add({dx, ys[k] - y});
+            if (k == s || std::abs(dx) >= half)
+                continue;
+            if (list.count == kMaxNeighbours) {
+                crowded = true;
+                break;
+            }
+            list.add({dx, ys[k] - y});
+        }
+        if (crowded) {
+            // More than the list holds: keep the nearest rows, scanning outward from the blob's.
+            list.clear();
+            int up = s - 1, down = s + 1;
+            while (list.count < kMaxNeighbours) {
+                const double dyUp = up >= 0 ? y - ys[up] : std::numeric_limits<double>::infinity();
+                const double dyDown =
+                    down < valid ? ys[down] - y : std::numeric_limits<double>::infinity();
+                if (std::min(dyUp, dyDown) >= half)
+                    break;
+                const int k = dyUp <= dyDown ? up-- : down++;
+                const double dx = xs[k] - x;
+                if (std::abs(dx) < half)
+                    list.add({dx, ys[k] - y});
+            }
         }
         list.pad();
     }
