@@ -273,3 +273,29 @@ TEST(BlockSolver, OversizedBlockFallsBackToMutualBest) {
     for (const auto& [i, j] : pairs)
         EXPECT_EQ(i, (j + 2) % 6);
 }
+
+TEST(SlhSolver, ClosedFormTwoByTwoAgreesWithTheSvd) {
+    std::mt19937 random(5);
+    std::uniform_real_distribution<double> value(0.0, 1.0);
+    SlhSolver solver;
+    for (int trial = 0; trial < 2000; ++trial) {
+        ProximityBlock g(2, 2);
+        for (Eigen::Index i = 0; i < 4; ++i)
+            g.data()[i] = value(random);
+        std::set<std::pair<int, int>> closedForm, reference;
+        solver.solve(g, 0.0, [&](int r, int c) { closedForm.insert({r, c}); });
+
+        const Eigen::Matrix2d dense = g;
+        const Eigen::JacobiSVD<Eigen::Matrix2d> svd(dense,
+                                                    Eigen::ComputeFullU | Eigen::ComputeFullV);
+        const Eigen::Matrix2d p = svd.matrixU() * svd.matrixV().transpose();
+        for (int r = 0; r < 2; ++r) {
+            Eigen::Index c = 0, back = 0;
+            p.row(r).maxCoeff(&c);
+            p.col(c).maxCoeff(&back);
+            if (back == r)
+                reference.insert({r, static_cast<int>(c)});
+        }
+        EXPECT_EQ(closedForm, reference) << g;
+    }
+}
