@@ -129,11 +129,13 @@ void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
     m.peak = peak;
 
     // 8-connectivity: a previous run touches this one if their x ranges overlap when widened by 1.
+    // Runs of a row come left to right, so a previous run that ends before this one starts can
+    // touch no later run either: the scan resumes where the last one left off.
+    while (previousScan_ < previousCount_ && previousRuns_[idx(previousScan_)].x1 < x0 - 1)
+        ++previousScan_;
     int label = -1;
-    for (int i = 0; i < previousCount_; ++i) {
+    for (int i = previousScan_; i < previousCount_; ++i) {
         const Run& p = previousRuns_[idx(i)];
-        if (p.x1 < x0 - 1)
-            continue;
         if (p.x0 > x1 + 1)
             break;
         if (p.label < 0)
@@ -150,6 +152,7 @@ void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
 void BlobDetector::finishRow() {
     std::swap(previousRuns_, currentRuns_);
     previousCount_ = currentCount_;
+    previousScan_ = 0;
     currentCount_ = 0;
 }
 
@@ -162,6 +165,7 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     labelCount_ = 0;
     labelsExhausted_ = false;
     previousCount_ = 0;
+    previousScan_ = 0;
     currentCount_ = 0;
 
     const std::uint8_t threshold = config_.threshold;

@@ -103,6 +103,8 @@ private:
     std::unique_ptr<Run[]> previousRuns_;
     std::unique_ptr<Run[]> currentRuns_;
     int previousCount_ = 0;
+    /// First previous run that can still touch a run of the current row.
+    int previousScan_ = 0;
     int currentCount_ = 0;
 };
 
