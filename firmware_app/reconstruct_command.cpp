@@ -1,6 +1,7 @@
 // `edgetrack reconstruct`: blob detection, stereo correspondence and triangulation of a recording.
 #include "firmware_app/reconstruct_command.hpp"
 
+#include <cstdint>
 #include <map>
 #include <vector>
 
@@ -133,9 +134,9 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     if (Status s = copyTruth(options.input, options.out); !s)
         return s;
 
-    const std::size_t blobOverflow = blobs[0].overflowCount() + blobs[1].overflowCount() +
-                                     detector0.counters().blobOverflow +
-                                     detector1.counters().blobOverflow;
+    // The blob vectors count every refused blob, from the detector and from blobs.csv alike (the
+    // detector's own counter sees the same refusals, so adding it would count them twice).
+    const std::uint64_t blobOverflow = blobs[0].overflowCount() + blobs[1].overflowCount();
     summary << "edgetrack reconstruct: " << frames->size() << " frames from "
             << recording::levelName(*level) << ", " << blobRows.size() << " blobs, "
             << pointRows.size() << " markers; rejected blobs "
