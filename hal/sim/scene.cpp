@@ -78,22 +78,25 @@ Quat randomRotation(Random& random) {
 
 } // namespace
 
-MarkerObject makeCube70() {
+namespace {
+// A cube of edge 2 * half_mm with perFace markers scattered on each face.
+MarkerObject makeCube(const char* name, double half_mm, int perFace, double diameter_mm,
+                      double margin_mm, double spacing_mm, std::uint64_t layoutSeed) {
     MarkerObject cube;
-    cube.name = "cube70";
-    cube.markerDiameter_mm = 6.0;
-    cube.markers = scatter(cubeFaces(35.0, 5), 7.0, 15.0, 70);
-    cube.bodyBoxes.push_back({Vec3::Zero(), Vec3::Constant(35.0)});
+    cube.name = name;
+    cube.markerDiameter_mm = diameter_mm;
+    cube.markers = scatter(cubeFaces(half_mm, perFace), margin_mm, spacing_mm, layoutSeed);
+    cube.bodyBoxes.push_back({Vec3::Zero(), Vec3::Constant(half_mm)});
     return cube;
+}
+} // namespace
+
+MarkerObject makeCube70() {
+    return makeCube("cube70", 35.0, 5, 6.0, 7.0, 15.0, 70);
 }
 
 MarkerObject makeCube50() {
-    MarkerObject cube;
-    cube.name = "cube50";
-    cube.markerDiameter_mm = 5.0;
-    cube.markers = scatter(cubeFaces(25.0, 4), 6.0, 13.0, 50);
-    cube.bodyBoxes.push_back({Vec3::Zero(), Vec3::Constant(25.0)});
-    return cube;
+    return makeCube("cube50", 25.0, 4, 5.0, 6.0, 13.0, 50);
 }
 
 MarkerObject makeSphere70() {
