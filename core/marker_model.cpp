@@ -1,0 +1,196 @@
+// Rigid marker models: storage, canonical frames, and S_min from self- and cross-congruences.
+#include "core/marker_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+
+#include "core/marker_set.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+MarkerModel::MarkerModel(std::size_t maxMarkers)
+    : markers_model_mm(maxMarkers)
+    , edges(maxMarkers * (maxMarkers > 0 ? maxMarkers - 1 : 0) / 2) {}
+
+bool MarkerModel::assign(const MarkerModel& other) {
+    if (other.markers_model_mm.size() > markers_model_mm.capacity() ||
+        other.edges.size() > edges.capacity())
+        return false;
+    id = other.id;
+    sMin = other.sMin;
+    sameShapeAs = other.sameShapeAs;
+    markers_model_mm.clear();
+    for (const Vec3& m : other.markers_model_mm)
+        markers_model_mm.push_back(m);
+    edges.clear();
+    for (const ModelEdge& e : other.edges)
+        edges.push_back(e);
+    return true;
+}
+
+void MarkerModel::clear() {
+    id = 0;
+    sMin = 4;
+    sameShapeAs = -1;
+    markers_model_mm.clear();
+    edges.clear();
+}
+
+bool MarkerModel::hasEdge(std::size_t a, std::size_t b) const {
+    if (a > b)
+        std::swap(a, b);
+    return std::any_of(edges.begin(), edges.end(),
+                       [&](const ModelEdge& e) { return e.from == a && e.to == b; });
+}
+
+namespace {
+
+using Adjacency = FixedVector<MarkerSet, MarkerSet::kCapacity>;
+
+void buildAdjacency(const MarkerModel& model, Adjacency& adjacency) {
+    adjacency.clear();
+    adjacency.resize(std::min(model.markers_model_mm.size(), MarkerSet::kCapacity));
+    for (const ModelEdge& e : model.edges) {
+        if (e.from >= adjacency.size() || e.to >= adjacency.size())
+            continue;
+        adjacency[e.from].insert(e.to);
+        adjacency[e.to].insert(e.from);
+    }
+}
+
+// A triangle this flat fixes the rotation about its long side poorly; it proves nothing.
+bool wellShaped(const Vec3& a, const Vec3& b, const Vec3& c, double minHeight_mm) {
+    const double twiceArea = (b - a).cross(c - a).norm();
+    const double longest = std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
+    return longest > 0.0 && twiceArea / longest >= minHeight_mm;
+}
+
+// Markers of `from` that land within tolerance of some marker of `to` under `transform`.
+std::size_t countCongruent(const MarkerModel& from, const MarkerModel& to,
+                           const RigidTransform& transform, double tolerance2) {
+    std::size_t count = 0;
+    for (const Vec3& m : from.markers_model_mm) {
+        const Vec3 moved = transform.apply(m);
+        for (const Vec3& n : to.markers_model_mm)
+            if ((moved - n).squaredNorm() <= tolerance2) {
+                ++count;
+                break;
+            }
+    }
+    return count;
+}
+
+// The most markers of `a` that fit `b` under one transform other than the identity of a model
+// with itself, found from congruent co-visible triangles.
+std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const MarkerModel& b,
+                              const Adjacency& adjB, bool self, const SminConfig& config) {
+    const double tol = config.tolerance_mm;
+    const double tol2 = tol * tol;
+    const auto& pa = a.markers_model_mm;
+    const auto& pb = b.markers_model_mm;
+    std::size_t best = 0;
+    for (std::size_t i = 0; i < adjA.size(); ++i) {
+        adjA[i].forEach([&](std::size_t j) {
+            if (j <= i)
+                return;
+            (adjA[i] & adjA[j]).forEach([&](std::size_t k) {
+                if (k <= j || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
+                    return;
+                const double dij = (pa[i] - pa[j]).norm();
+                const double dik = (pa[i] - pa[k]).norm();
+                const double djk = (pa[j] - pa[k]).norm();
+                for (std::size_t x = 0; x < adjB.size(); ++x) {
+                    adjB[x].forEach([&](std::size_t y) {
+                        if (std::abs((pb[x] - pb[y]).norm() - dij) > tol)
+                            return;
+                        (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
+                            if (self && x == i && y == j && z == k)
+                                return;
+                            if (std::abs((pb[x] - pb[z]).norm() - dik) > tol ||
+                                std::abs((pb[y] - pb[z]).norm() - djk) > tol)
+                                return;
+                            const Vec3 from[3] = {pa[i], pa[j], pa[k]};
+                            const Vec3 to[3] = {pb[x], pb[y], pb[z]};
+                            const std::optional<RigidFit> fit = fitRigid(from, to);
+                            if (!fit)
+                                return;
+                            best = std::max(best, countCongruent(a, b, fit->transform, tol2));
+                        });
+                    });
+                }
+            });
+        });
+    }
+    return best;
+}
+
+} // namespace
+
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {
+    // Largest ambiguous set per model, kept in sMin until the end.
+    for (MarkerModel& m : models) {
+        m.sMin = 0;
+        m.sameShapeAs = -1;
+    }
+    Adjacency adjA, adjB;
+    for (std::size_t a = 0; a < models.size(); ++a) {
+        buildAdjacency(models[a], adjA);
+        for (std::size_t b = a; b < models.size(); ++b) {
+            buildAdjacency(models[b], adjB);
+            const bool self = a == b;
+            const std::size_t l = largestCongruence(models[a], adjA, models[b], adjB, self, config);
+            const double smaller = static_cast<double>(
+                std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size()));
+            if (!self && static_cast<double>(l) >= config.sameShapeShare * smaller) {
+                models[a].sameShapeAs = static_cast<std::int32_t>(b);
+                models[b].sameShapeAs = static_cast<std::int32_t>(a);
+                continue;
+            }
+            const auto l32 = static_cast<std::uint32_t>(l);
+            models[a].sMin = std::max(models[a].sMin, l32);
+            models[b].sMin = std::max(models[b].sMin, l32);
+        }
+    }
+    for (MarkerModel& m : models) {
+        const auto size = static_cast<std::uint32_t>(m.markers_model_mm.size());
+        m.sMin = std::max(config.floor, std::min(m.sMin + 1, size));
+    }
+}
+
+RigidTransform canonicalFrame(std::span<const Vec3> layout_mm) {
+    if (layout_mm.empty())
+        return RigidTransform::identity();
+    Vec3 centroid = Vec3::Zero();
+    for (const Vec3& p : layout_mm)
+        centroid += p;
+    centroid /= static_cast<double>(layout_mm.size());
+    Mat3 covariance = Mat3::Zero();
+    for (const Vec3& p : layout_mm)
+        covariance += (p - centroid) * (p - centroid).transpose();
+    const Eigen::SelfAdjointEigenSolver<Mat3> solver(covariance);
+    // Eigenvalues come in increasing order; the first axis is the one of largest spread.
+    Vec3 x = solver.eigenvectors().col(2);
+    Vec3 y = solver.eigenvectors().col(1);
+    auto thirdMoment = [&](const Vec3& axis) {
+        double sum = 0.0;
+        for (const Vec3& p : layout_mm) {
+            const double s = (p - centroid).dot(axis);
+            sum += s * s * s;
+        }
+        return sum;
+    };
+    if (thirdMoment(x) < 0.0)
+        x = -x;
+    if (thirdMoment(y) < 0.0)
+        y = -y;
+    Mat3 axes;
+    axes.col(0) = x;
+    axes.col(1) = y;
+    axes.col(2) = x.cross(y);
+    return RigidTransform::fromMatrix(axes, centroid);
+}
+
+} // namespace edgetrack

@@ -1,0 +1,86 @@
+// Rigid marker models (paper sections 4-5): marker layout in the model frame, co-visibility edges,
+// and S_min, the number of markers that identify the model unambiguously.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "core/bounded_vector.hpp"
+#include "core/geometry.hpp"
+#include "core/rigid_transform.hpp"
+
+namespace edgetrack {
+
+/// \brief Two markers of a model seen at the same time, and their distance (mm).
+struct ModelEdge {
+    std::uint16_t from = 0;
+    std::uint16_t to = 0;
+    double distance_mm = 0.0;
+};
+
+/**
+ * \brief A rigid object's markers in its own frame (mm) and which of them can be seen together.
+ *
+ * Storage is sized once by the constructor (markers, and every pair of them as a possible edge);
+ * filling it never allocates.
+ */
+class MarkerModel {
+public:
+    MarkerModel() = default;
+    /// \brief An empty model that can hold \a maxMarkers markers and all edges between them.
+    explicit MarkerModel(std::size_t maxMarkers);
+
+    /// \brief Copy \a other's content; false when it does not fit this model's capacity.
+    bool assign(const MarkerModel& other);
+    void clear();
+
+    std::uint32_t id = 0;
+    /// Marker positions in the model frame (mm).
+    BoundedVector<Vec3> markers_model_mm;
+    /// Co-visible marker pairs, from < to, with the distance of the model positions.
+    BoundedVector<ModelEdge> edges;
+    /// Smallest number of co-visible markers that identifies this model (>= 4).
+    std::uint32_t sMin = 4;
+    /// Another model with (almost) the same layout, told apart only by tracking continuity; -1
+    /// none.
+    std::int32_t sameShapeAs = -1;
+
+    /// \return whether an edge joins markers \a a and \a b.
+    bool hasEdge(std::size_t a, std::size_t b) const;
+};
+
+/// \brief Settings of the S_min analysis.
+struct SminConfig {
+    /// Two distances this close are indistinguishable to the tracker (mm).
+    double tolerance_mm = 2.0;
+    /// A mapping between two models covering this share of the smaller one makes them copies.
+    double sameShapeShare = 0.8;
+    /// S_min is never below this: with three markers, one spurious point can complete a false fit.
+    std::uint32_t floor = 4;
+};
+
+/**
+ * \brief Set every model's S_min (and sameShapeAs) from its congruences with itself and the others.
+ *
+ * For every pair of co-visible triangles, of one model and of itself or another model, whose sides
+ * agree within the tolerance (other than a triangle with itself), the rigid transform between them
+ * is applied to the whole model and the markers that land on a marker of the other are counted: L
+ * markers that fit two ways cannot identify the model, L + 1 can. S_min is the largest such L plus
+ * one, at least \a config.floor and at most the model's size. Models that map onto each other
+ * almost entirely are copies of one layout (two identical cubes): they are marked as the same
+ * shape and left out of each other's S_min, since no number of markers tells them apart.
+ *
+ * Runs once at the end of a calibration; its cost grows with the triangles of each model.
+ */
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config);
+
+/**
+ * \brief The canonical frame of a marker layout: origin at the centroid, axes along the principal
+ * axes by decreasing spread, signs fixed by the third moments (so a layout gets the same frame
+ * whatever frame it was measured in, unless its spread is isotropic).
+ * \return T_layout_from_canonical: maps canonical coordinates to the layout's coordinates.
+ */
+RigidTransform canonicalFrame(std::span<const Vec3> layout_mm);
+
+} // namespace edgetrack

@@ -1,0 +1,846 @@
+// Object calibration (paper section 4.2): elastic edges, pyramid clustering, occluded-marker
+// prediction, reappearing and new markers, object collapsing.
+#include "core/object_calibrator.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
+    : config_(config)
+    , valid_(config.maxMarkersPerObject >= 4 &&
+             config.maxMarkersPerObject <= MarkerSet::kCapacity && config.maxObjects >= 1 &&
+             config.maxMarkers >= config.maxMarkersPerObject && config.edgeWindow_frames >= 1.0)
+    , stride_(std::min(config.maxMarkersPerObject, MarkerSet::kCapacity))
+    , tracker_(config.tracking)
+    , clustering_(config.maxCliques, config.cliqueStepBudget)
+    , markers_(config.maxMarkers)
+    , byTrackerId_(config.maxMarkers)
+    , knownOfTracked_(config.tracking.maxMarkers)
+    , fitFrom_(stride_)
+    , fitTo_(stride_)
+    , fitMember_(stride_)
+    , residual_(stride_)
+    , stamp_(config.maxMarkers)
+    , candidates_(config.maxMarkers)
+    , memberPairs_(stride_ * stride_)
+    , edgeAlpha_(2.0 / (config.edgeWindow_frames + 1.0)) {
+    objects_.resize(config.maxObjects);
+    for (Object& o : objects_) {
+        o.members = BoundedVector<Member>(stride_);
+        o.edges = BoundedVector<Edge>(stride_ * stride_);
+        o.edges.resize(stride_ * stride_);
+    }
+    markers_.resize(config.maxMarkers);
+    stamp_.resize(config.maxMarkers);
+}
+
+void ObjectCalibrator::reset() {
+    tracker_.reset();
+    for (Object& o : objects_) {
+        o.active = false;
+        o.members.clear();
+    }
+    for (KnownMarker& m : markers_)
+        m = KnownMarker{};
+    byTrackerId_.clear();
+    counters_ = CalibrationCounters{};
+    nextMarkerId_ = 1;
+    nextObjectId_ = 0;
+}
+
+void ObjectCalibrator::update(double time_s, std::span<const Vec3> points_rig_mm) {
+    if (!valid_)
+        return;
+    ++counters_.frames;
+    structureChanged_ = false;
+    const std::span<const TrackedMarker> tracked = tracker_.update(time_s, points_rig_mm);
+    bindTrackedMarkers(tracked); // step 1
+    removeInvalidMarkers();      // step 3 (before the edges see them)
+    for (Object& o : objects_)   // step 2, and the poses of step 5
+        if (o.active)
+            updateObject(o);
+    for (std::size_t i = 0; i < objects_.size(); ++i) // step 4
+        if (objects_[i].active && objects_[i].dirty)
+            clusterObject(i);
+    if (structureChanged_) // step 7
+        collapseObjects();
+    recogniseReappearing(tracked); // step 5
+    insertNewMarkers(tracked);     // step 6
+    rebuildTrackerIndex();
+}
+
+// --- Step 1: markers keep their calibration identity through the frame-to-frame IDs. ---------
+
+void ObjectCalibrator::bindTrackedMarkers(std::span<const TrackedMarker> tracked) {
+    for (KnownMarker& m : markers_)
+        m.visible = false;
+    knownOfTracked_.clear();
+    knownOfTracked_.resize(tracked.size());
+    for (std::size_t t = 0; t < tracked.size(); ++t) {
+        knownOfTracked_[t] = kNone;
+        if (tracked[t].age == 0)
+            continue;
+        const std::size_t k = findByTrackerId(tracked[t].id);
+        if (k == kNone)
+            continue;
+        KnownMarker& m = markers_[k];
+        m.visible = true;
+        m.position_rig_mm = tracked[t].position_rig_mm;
+        ++m.framesSeen;
+        knownOfTracked_[t] = k;
+    }
+}
+
+std::size_t ObjectCalibrator::findByTrackerId(std::uint32_t trackerId) const {
+    const auto* it = std::lower_bound(byTrackerId_.begin(), byTrackerId_.end(), trackerId,
+                                      [](const std::pair<std::uint32_t, std::size_t>& e,
+                                         std::uint32_t id) { return e.first < id; });
+    return it != byTrackerId_.end() && it->first == trackerId ? it->second : kNone;
+}
+
+void ObjectCalibrator::rebuildTrackerIndex() {
+    byTrackerId_.clear();
+    for (std::size_t k = 0; k < markers_.size(); ++k)
+        if (markers_[k].used && markers_[k].visible && markers_[k].trackerId != 0)
+            byTrackerId_.push_back({markers_[k].trackerId, k});
+    std::sort(byTrackerId_.begin(), byTrackerId_.end());
+}
+
+// --- Step 3: markers seen only briefly were reflections, not markers. ------------------------
+
+void ObjectCalibrator::removeInvalidMarkers() {
+    for (std::size_t k = 0; k < markers_.size(); ++k) {
+        KnownMarker& m = markers_[k];
+        if (!m.used || m.visible)
+            continue;
+        m.trackerId = 0;
+        m.rejected = false;
+        if (m.framesSeen < config_.minLifetime_frames) {
+            for (Object& o : objects_) {
+                if (!o.active)
+                    continue;
+                for (std::size_t i = 0; i < o.members.size(); ++i)
+                    if (o.members[i].marker == k) {
+                        removeMember(o, i);
+                        o.dirty = true;
+                        break;
+                    }
+            }
+            ++counters_.invalidRemoved;
+            if (markers_[k].used)
+                releaseMarker(k);
+        } else if (m.objectCount == 0) {
+            releaseMarker(k);
+        }
+    }
+}
+
+// --- Step 2 and the pose of step 5. ------------------------------------------------------------
+
+void ObjectCalibrator::updateObject(Object& o) {
+    ++o.age;
+    for (Member& member : o.members)
+        member.visible = markers_[member.marker].visible;
+    fitPose(o);
+
+    // Where each member is now: seen, or predicted by the pose when it was reliable the last
+    // time it was seen. A visible marker that moves against an occluded one's prediction breaks
+    // their edge too; without this, edges to occluded markers would never break and would hold
+    // objects together that have long moved apart.
+    const std::size_t n = o.members.size();
+    residual_.clear();
+    fitTo_.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+        const Member& m = o.members[i];
+        const bool predictable =
+            o.posed && m.verified && m.wasInlier && m.framesReliable >= config_.minModelFrames;
+        fitTo_.push_back(m.visible ? markers_[m.marker].position_rig_mm
+                                   : o.rigFromObject.apply(m.model_mm));
+        residual_.push_back(m.visible ? 1.0 : (predictable ? 0.0 : -1.0));
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        if (residual_[i] < 0.0)
+            continue;
+        for (std::size_t j = i + 1; j < n; ++j) {
+            if (residual_[j] < 0.0 || residual_[i] + residual_[j] < 1.0)
+                continue; // unknown, or both predicted
+            Edge& e = edge(o, i, j);
+            if (residual_[i] > 0.0 && residual_[j] > 0.0 && o.posed && o.members[i].inlier &&
+                o.members[j].inlier)
+                e.coVisible = true;
+            if (e.state != EdgeState::Active)
+                continue;
+            const double d = (fitTo_[i] - fitTo_[j]).norm();
+            e.recent_mm += edgeAlpha_ * (d - e.recent_mm);
+            if (std::abs(e.recent_mm - e.mean_mm) > config_.edgeBreak_mm) {
+                e.state = EdgeState::Broken;
+                o.dirty = true;
+                ++counters_.edgesBroken;
+            } else {
+                e.samples = std::min(e.samples + 1, config_.modelAverage_frames);
+                e.mean_mm += (d - e.mean_mm) / e.samples;
+            }
+        }
+    }
+    for (Member& m : o.members)
+        if (m.visible)
+            m.wasInlier = o.posed && m.inlier;
+
+    if (!o.posed)
+        return;
+    const RigidTransform objectFromRig = o.rigFromObject.inverse();
+    for (Member& member : o.members) {
+        if (!member.visible || !member.inlier)
+            continue;
+        member.samples = std::min(member.samples + 1, config_.modelAverage_frames);
+        member.model_mm +=
+            (objectFromRig.apply(markers_[member.marker].position_rig_mm) - member.model_mm) /
+            member.samples;
+        ++member.framesReliable;
+    }
+}
+
+void ObjectCalibrator::fitPose(Object& o, bool remeasure) {
+    o.posed = false;
+    fitFrom_.clear();
+    fitTo_.clear();
+    fitMember_.clear();
+    residual_.clear();
+    std::size_t visible = 0;
+    for (std::size_t i = 0; i < o.members.size(); ++i) {
+        Member& member = o.members[i];
+        member.inlier = false;
+        if (!member.visible)
+            continue;
+        ++visible;
+        if (!member.verified)
+            continue;
+        fitFrom_.push_back(member.model_mm);
+        fitTo_.push_back(markers_[member.marker].position_rig_mm);
+        fitMember_.push_back(i);
+        // Established markers outvote new ones: a group of markers that just joined the object
+        // (new markers go to every object) must not take its pose over.
+        residual_.push_back(member.framesReliable >= config_.minModelFrames ? kEstablishedVote
+                                                                            : 1.0);
+    }
+    std::optional<RigidTransform> pose = consensusPose();
+    if (!pose) {
+        if (visible >= config_.minModelMarkers)
+            rebase(o);
+        return;
+    }
+    const RigidTransform objectFromRig = pose->inverse();
+    for (Member& member : o.members) {
+        if (!member.visible)
+            continue;
+        const Vec3& p = markers_[member.marker].position_rig_mm;
+        if (!member.verified || remeasure) {
+            // Measured under another frame (a re-based object, or a part that split off): it is
+            // measured again in this one, and has to earn its place in the model again.
+            if (!member.verified ||
+                (pose->apply(member.model_mm) - p).norm() > config_.poseInlier_mm) {
+                member.model_mm = objectFromRig.apply(p);
+                member.samples = 1;
+                member.framesReliable = 0;
+                member.verified = true;
+                member.recentResidual_mm = 0.0;
+            }
+        }
+        const double residual = (pose->apply(member.model_mm) - p).norm();
+        member.inlier = residual <= config_.poseInlier_mm;
+        member.recentResidual_mm += edgeAlpha_ * (residual - member.recentResidual_mm);
+    }
+    o.posed = true;
+    o.rigFromObject = *pose;
+    if (remeasure)
+        for (Member& member : o.members)
+            if (!member.visible)
+                member.framesReliable = 0; // it may belong to the other part; seen again, it shows
+    // A marker that keeps away from where the object's pose puts it is not rigid with the markers
+    // that agree with the pose: its edges to them break. This sees a marker drift from the whole
+    // object at once, sooner than any single distance shows it.
+    for (std::size_t i = 0; i < o.members.size(); ++i) {
+        Member& member = o.members[i];
+        if (!member.visible || member.recentResidual_mm <= config_.edgeBreak_mm)
+            continue;
+        member.recentResidual_mm = 0.0;
+        for (std::size_t j = 0; j < o.members.size(); ++j) {
+            if (j == i || !o.members[j].inlier)
+                continue;
+            Edge& e = edge(o, std::min(i, j), std::max(i, j));
+            if (e.state == EdgeState::Active) {
+                e.state = EdgeState::Broken;
+                o.dirty = true;
+                ++counters_.edgesBroken;
+            }
+        }
+    }
+}
+
+std::optional<RigidTransform> ObjectCalibrator::consensusPose() {
+    const std::size_t n = fitFrom_.size();
+    if (n < 3)
+        return std::nullopt;
+    const std::span<const double> votes = residual_.span();
+    auto countInliers = [&](const RigidTransform& t) {
+        double count = 0.0;
+        for (std::size_t i = 0; i < n; ++i)
+            if ((t.apply(fitFrom_[i]) - fitTo_[i]).norm() <= config_.poseInlier_mm)
+                count += votes[i];
+        return count;
+    };
+    double allVotes = 0.0;
+    for (double v : votes)
+        allVotes += v;
+    std::optional<RigidFit> all = fitRigid(fitFrom_.span(), fitTo_.span());
+    std::optional<RigidTransform> best;
+    double bestCount = 0.0;
+    if (all) {
+        best = all->transform;
+        bestCount = countInliers(all->transform);
+        if (bestCount == allVotes)
+            return best;
+    }
+    // Some members disagree (an object splitting, stale positions): the pose that most members
+    // agree with wins, tried from spread-out triples (deterministic, so runs repeat).
+    const std::size_t tries = std::min<std::size_t>(kConsensusTries, n * (n - 1) * (n - 2) / 6);
+    for (std::size_t t = 0; t < tries; ++t) {
+        const std::size_t a = t % n;
+        const std::size_t b = (a + 1 + (t / n) % (n - 1)) % n;
+        std::size_t c = (a + n / 3 + t / 7) % n;
+        if (c == a || c == b)
+            c = (std::max(a, b) + 1) % n;
+        if (c == a || c == b)
+            continue;
+        const Vec3 from[3] = {fitFrom_[a], fitFrom_[b], fitFrom_[c]};
+        const Vec3 to[3] = {fitTo_[a], fitTo_[b], fitTo_[c]};
+        const std::optional<RigidFit> fit = fitRigid(from, to);
+        if (!fit || fit->rms_mm > config_.poseInlier_mm)
+            continue;
+        const double count = countInliers(fit->transform);
+        if (count > bestCount) {
+            bestCount = count;
+            best = fit->transform;
+        }
+    }
+    if (!best)
+        return std::nullopt;
+    // Refit on the agreeing members only.
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < n; ++i)
+        if ((best->apply(fitFrom_[i]) - fitTo_[i]).norm() <= config_.poseInlier_mm) {
+            fitFrom_[kept] = fitFrom_[i];
+            fitTo_[kept] = fitTo_[i];
+            ++kept;
+        }
+    if (kept < 3)
+        return std::nullopt;
+    const std::optional<RigidFit> refit =
+        fitRigid(std::span(fitFrom_.data(), kept), std::span(fitTo_.data(), kept));
+    if (!refit)
+        return std::nullopt;
+    return refit->transform;
+}
+
+void ObjectCalibrator::rebase(Object& o) {
+    // No pose agrees with three members: start the object's frame afresh at the rig's frame from
+    // what is visible; occluded members wait to be seen again (their positions belong to the old
+    // frame).
+    for (Member& member : o.members) {
+        if (member.visible) {
+            member.model_mm = markers_[member.marker].position_rig_mm;
+            member.samples = 1;
+            member.framesReliable = 0;
+            member.verified = true;
+        } else {
+            member.verified = false;
+        }
+    }
+    o.posed = true;
+    o.rigFromObject = RigidTransform::identity();
+    ++counters_.rebased;
+}
+
+// --- Step 4: pyramid clustering splits graphs that lost edges. ---------------------------------
+
+void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
+    Object& o = objects_[objectIndex];
+    const std::size_t n = o.members.size();
+    // Edges younger than the running window have not had the chance to break yet. A new marker
+    // is joined to everything in view, so counting its edges would bridge objects that are moving
+    // apart (with two new markers on each, they chain into pyramids across); its young edges are
+    // left out, and a marker with only young edges goes with every part.
+    const auto mature = static_cast<std::uint32_t>(config_.edgeWindow_frames);
+    adjacency_.clear();
+    adjacency_.resize(n);
+    MarkerSet pending = MarkerSet::firstN(n);
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + 1; j < n; ++j) {
+            const Edge& e = edge(o, i, j);
+            if (e.state != EdgeState::Active)
+                continue;
+            if (e.samples >= mature) {
+                adjacency_[i].insert(j);
+                adjacency_[j].insert(i);
+                pending.erase(i);
+                pending.erase(j);
+            }
+        }
+    for (std::size_t i = 0; i < n; ++i)
+        if (!adjacency_[i].empty() || !hasActiveEdge(o, i))
+            pending.erase(i);
+    const MarkerSet all = MarkerSet::firstN(n);
+    if (!clustering_.cluster(adjacency_.span(), all.minus(pending))) {
+        ++counters_.clusteringDeferred;
+        return; // still dirty: tried again next frame
+    }
+    o.dirty = false;
+    const std::span<const MarkerSet> clusters = clustering_.clusters();
+    if (clusters.size() == 1 && (clusters[0] | pending) == all)
+        return;
+    structureChanged_ = true;
+    if (clusters.size() > 1)
+        ++counters_.splits;
+
+    // Clusters after the first become new objects with their part of the graph.
+    FixedVector<std::size_t, MarkerSet::kCapacity> newIndex;
+    for (std::size_t c = 1; c < clusters.size(); ++c) {
+        Object* part = newObject();
+        if (part == nullptr) {
+            ++counters_.objectOverflow;
+            continue;
+        }
+        Object& whole = objects_[objectIndex]; // newObject() does not move objects
+        newIndex.clear();
+        newIndex.resize(n);
+        std::fill(newIndex.begin(), newIndex.end(), kNone);
+        (clusters[c] | pending).forEach([&](std::size_t i) {
+            if (addMember(*part, whole.members[i].marker, whole.members[i].model_mm)) {
+                Member& copy = part->members.back();
+                copy = whole.members[i];
+                newIndex[i] = part->members.size() - 1;
+            }
+        });
+        for (std::size_t i = 0; i < n; ++i)
+            for (std::size_t j = i + 1; j < n; ++j)
+                if (newIndex[i] != kNone && newIndex[j] != kNone)
+                    edge(*part, newIndex[i], newIndex[j]) = edge(whole, i, j);
+        part->rigFromObject = whole.rigFromObject;
+        fitPose(*part, true);
+    }
+    // The first cluster stays in this object; members of no cluster leave it.
+    const MarkerSet keep = (clusters.empty() ? MarkerSet{} : clusters[0]) | pending;
+    for (std::size_t i = n; i-- > 0;)
+        if (!keep.contains(i))
+            removeMember(o, i);
+    if (o.members.empty())
+        deactivate(o);
+    else
+        fitPose(o, clusters.size() > 1);
+}
+
+bool ObjectCalibrator::hasActiveEdge(const Object& o, std::size_t member) const {
+    for (std::size_t j = 0; j < o.members.size(); ++j)
+        if (j != member &&
+            edge(o, std::min(j, member), std::max(j, member)).state == EdgeState::Active)
+            return true;
+    return false;
+}
+
+// --- Step 5: new markers near an occluded marker's predicted place are that marker. -----------
+
+void ObjectCalibrator::recogniseReappearing(std::span<const TrackedMarker> tracked) {
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    for (std::size_t t = 0; t < tracked.size(); ++t) {
+        if (knownOfTracked_[t] != kNone)
+            continue;
+        const Vec3& p = tracked[t].position_rig_mm;
+        std::size_t best = kNone;
+        double bestDistance2 = radius2;
+        for (const Object& o : objects_) {
+            if (!o.active || !o.posed)
+                continue;
+            for (const Member& member : o.members) {
+                if (markers_[member.marker].visible)
+                    continue;
+                const double d2 = (o.rigFromObject.apply(member.model_mm) - p).squaredNorm();
+                if (d2 <= bestDistance2) {
+                    bestDistance2 = d2;
+                    best = member.marker;
+                }
+            }
+        }
+        if (best == kNone)
+            continue;
+        KnownMarker& m = markers_[best];
+        m.visible = true;
+        m.trackerId = tracked[t].id;
+        m.position_rig_mm = p;
+        ++m.framesSeen;
+        knownOfTracked_[t] = best;
+        ++counters_.markersReappeared;
+    }
+}
+
+// --- Step 6: other new markers join every posed object, or start one. --------------------------
+
+void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) {
+    for (std::size_t t = 0; t < tracked.size(); ++t) {
+        if (knownOfTracked_[t] != kNone)
+            continue;
+        const std::size_t k = newMarker(tracked[t].id, tracked[t].position_rig_mm);
+        if (k == kNone)
+            continue;
+        knownOfTracked_[t] = k;
+        ++counters_.markersBorn;
+    }
+    // Markers in no object: this frame's new ones and any still waiting for an object.
+    candidates_.clear();
+    for (std::size_t k = 0; k < markers_.size(); ++k) {
+        const KnownMarker& m = markers_[k];
+        if (m.used && m.visible && m.objectCount == 0 &&
+            (!m.rejected || counters_.frames - m.rejectedAtFrame >= kRetryRejected_frames))
+            candidates_.push_back(k);
+    }
+    if (candidates_.empty())
+        return;
+    // The paper's future work: an object that was lost (out of view, or too few markers) is found
+    // again among the new markers with its partial model, and they take back their identities.
+    for (Object& o : objects_)
+        if (o.active && !o.posed && candidates_.size() >= kRefindMinMarkers)
+            refind(o);
+    if (candidates_.empty())
+        return;
+
+    auto connectToVisible = [&](Object& o, std::size_t newMember) {
+        const Vec3& p = markers_[o.members[newMember].marker].position_rig_mm;
+        for (std::size_t i = 0; i < o.members.size(); ++i) {
+            if (i == newMember || !markers_[o.members[i].marker].visible)
+                continue;
+            const double d = (p - markers_[o.members[i].marker].position_rig_mm).norm();
+            edge(o, std::min(i, newMember), std::max(i, newMember)) =
+                Edge{EdgeState::Active, false, 1, d, d};
+        }
+    };
+
+    bool inserted = false;
+    for (Object& o : objects_) {
+        if (!o.active || !o.posed)
+            continue;
+        const RigidTransform objectFromRig = o.rigFromObject.inverse();
+        for (std::size_t k : candidates_) {
+            if (!addMember(o, k, objectFromRig.apply(markers_[k].position_rig_mm)))
+                continue;
+            o.members.back().visible = true;
+            connectToVisible(o, o.members.size() - 1);
+            inserted = true;
+        }
+    }
+    if (inserted || candidates_.size() < config_.minModelMarkers)
+        return;
+    // Nothing in view to join: these markers start an object in the rig's frame, as all visible
+    // markers do at the start of a calibration.
+    Object* o = newObject();
+    if (o == nullptr) {
+        ++counters_.objectOverflow;
+        return;
+    }
+    for (std::size_t k : candidates_) {
+        if (!addMember(*o, k, markers_[k].position_rig_mm))
+            continue;
+        o->members.back().visible = true;
+        connectToVisible(*o, o->members.size() - 1);
+    }
+    o->posed = true;
+    o->rigFromObject = RigidTransform::identity();
+}
+
+void ObjectCalibrator::refind(Object& o) {
+    // Member pairs sorted by distance, so a candidate pair's distance finds its model pairs fast.
+    memberPairs_.clear();
+    const std::size_t n = o.members.size();
+    for (std::size_t i = 0; i < n; ++i) {
+        if (!o.members[i].verified || o.members[i].visible)
+            continue;
+        for (std::size_t j = 0; j < n; ++j)
+            if (j != i && o.members[j].verified && !o.members[j].visible)
+                memberPairs_.push_back(
+                    {(o.members[i].model_mm - o.members[j].model_mm).norm(), i, j});
+    }
+    if (memberPairs_.size() < 6)
+        return;
+    std::sort(
+        memberPairs_.begin(), memberPairs_.end(),
+        [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
+    const double tol = config_.smin.tolerance_mm;
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    const std::size_t c = candidates_.size();
+    auto position = [&](std::size_t candidate) -> const Vec3& {
+        return markers_[candidates_[candidate]].position_rig_mm;
+    };
+    std::size_t budget = kRefindBudget;
+    std::optional<RigidTransform> best;
+    std::size_t bestCount = kRefindMinMarkers - 1;
+    for (std::size_t a = 0; a < c && budget > 0; ++a)
+        for (std::size_t b = a + 1; b < c && budget > 0; ++b) {
+            const double dab = (position(a) - position(b)).norm();
+            const auto* first =
+                std::lower_bound(memberPairs_.begin(), memberPairs_.end(), dab - tol,
+                                 [](const MemberPair& p, double d) { return p.distance_mm < d; });
+            for (const auto* pair = first;
+                 pair != memberPairs_.end() && pair->distance_mm <= dab + tol && budget > 0;
+                 ++pair) {
+                const Vec3& mi = o.members[pair->i].model_mm;
+                const Vec3& mj = o.members[pair->j].model_mm;
+                for (std::size_t cc = b + 1; cc < c && budget > 0; ++cc) {
+                    const double dac = (position(a) - position(cc)).norm();
+                    const double dbc = (position(b) - position(cc)).norm();
+                    for (std::size_t l = 0; l < n && budget > 0; ++l) {
+                        --budget;
+                        const Member& ml = o.members[l];
+                        if (l == pair->i || l == pair->j || !ml.verified || ml.visible ||
+                            std::abs((mi - ml.model_mm).norm() - dac) > tol ||
+                            std::abs((mj - ml.model_mm).norm() - dbc) > tol)
+                            continue;
+                        const Vec3 from[3] = {mi, mj, ml.model_mm};
+                        const Vec3 to[3] = {position(a), position(b), position(cc)};
+                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        if (!fit)
+                            continue;
+                        std::size_t count = 0;
+                        for (std::size_t k = 0; k < c; ++k)
+                            for (const Member& m : o.members)
+                                if (m.verified && !m.visible &&
+                                    (fit->transform.apply(m.model_mm) - position(k))
+                                            .squaredNorm() <= radius2) {
+                                    ++count;
+                                    break;
+                                }
+                        if (count > bestCount) {
+                            bestCount = count;
+                            best = fit->transform;
+                        }
+                    }
+                }
+            }
+        }
+    if (budget == 0)
+        ++counters_.refindBudgetExhausted;
+    if (!best)
+        return;
+    // The candidates near a member's place are that member, seen again.
+    for (std::size_t k = c; k-- > 0;) {
+        const Vec3 p = position(k);
+        for (Member& m : o.members) {
+            if (!m.verified || m.visible || (best->apply(m.model_mm) - p).squaredNorm() > radius2)
+                continue;
+            KnownMarker& known = markers_[m.marker];
+            const std::size_t fresh = candidates_[k];
+            known.visible = true;
+            known.trackerId = markers_[fresh].trackerId;
+            known.position_rig_mm = p;
+            ++known.framesSeen;
+            releaseMarker(fresh);
+            m.visible = true;
+            candidates_.swapRemove(k);
+            ++counters_.markersReappeared;
+            break;
+        }
+    }
+    o.posed = true;
+    o.rigFromObject = *best;
+    ++counters_.refound;
+}
+
+// --- Step 7: small duplicates of an object are removed. ----------------------------------------
+
+void ObjectCalibrator::collapseObjects() {
+    for (std::size_t a = 0; a < objects_.size(); ++a) {
+        Object& small = objects_[a];
+        if (!small.active)
+            continue;
+        for (std::size_t b = 0; b < objects_.size(); ++b) {
+            const Object& large = objects_[b];
+            if (b == a || !large.active || large.members.size() < small.members.size())
+                continue;
+            // Of two equal objects the older stays.
+            if (large.members.size() == small.members.size() && large.id > small.id)
+                continue;
+            ++stampValue_;
+            for (const Member& member : large.members)
+                stamp_[member.marker] = stampValue_;
+            const bool subset =
+                std::all_of(small.members.begin(), small.members.end(), [&](const Member& member) {
+                    return stamp_[member.marker] == stampValue_;
+                });
+            if (subset) {
+                deactivate(small);
+                ++counters_.collapsed;
+                break;
+            }
+        }
+    }
+}
+
+// --- Storage. -----------------------------------------------------------------------------------
+
+ObjectCalibrator::Object* ObjectCalibrator::newObject() {
+    for (Object& o : objects_) {
+        if (o.active)
+            continue;
+        o.active = true;
+        o.id = nextObjectId_++;
+        o.members.clear();
+        o.dirty = false;
+        o.posed = false;
+        o.age = 0;
+        return &o;
+    }
+    return nullptr;
+}
+
+void ObjectCalibrator::deactivate(Object& o) {
+    while (!o.members.empty())
+        removeMember(o, o.members.size() - 1);
+    o.active = false;
+}
+
+bool ObjectCalibrator::addMember(Object& o, std::size_t marker, const Vec3& model_mm) {
+    const std::size_t index = o.members.size();
+    Member* member = o.members.append();
+    if (member == nullptr) {
+        ++counters_.memberOverflow;
+        return false;
+    }
+    member->marker = marker;
+    member->model_mm = model_mm;
+    member->samples = 1;
+    member->framesReliable = 0;
+    member->verified = true;
+    member->visible = false;
+    member->inlier = false;
+    member->wasInlier = false;
+    member->recentResidual_mm = 0.0;
+    for (std::size_t j = 0; j < stride_; ++j) {
+        edge(o, index, j) = Edge{};
+        edge(o, j, index) = Edge{};
+    }
+    ++markers_[marker].objectCount;
+    return true;
+}
+
+void ObjectCalibrator::removeMember(Object& o, std::size_t member) {
+    const std::size_t last = o.members.size() - 1;
+    const std::size_t marker = o.members[member].marker;
+    if (member != last) {
+        // The last member takes this index; its edges move with it (upper half: i < j).
+        for (std::size_t j = 0; j < last; ++j) {
+            if (j == member)
+                continue;
+            edge(o, std::min(member, j), std::max(member, j)) =
+                edge(o, std::min(last, j), std::max(last, j));
+        }
+    }
+    o.members.swapRemove(member);
+    KnownMarker& m = markers_[marker];
+    if (--m.objectCount == 0) {
+        if (m.visible) {
+            m.rejected = true;
+            m.rejectedAtFrame = counters_.frames;
+        } else
+            releaseMarker(marker);
+    }
+}
+
+std::size_t ObjectCalibrator::newMarker(std::uint32_t trackerId, const Vec3& position_rig_mm) {
+    for (std::size_t k = 0; k < markers_.size(); ++k) {
+        KnownMarker& m = markers_[k];
+        if (m.used)
+            continue;
+        m = KnownMarker{};
+        m.used = true;
+        m.id = nextMarkerId_++;
+        m.trackerId = trackerId;
+        m.visible = true;
+        m.position_rig_mm = position_rig_mm;
+        m.framesSeen = 1;
+        return k;
+    }
+    ++counters_.markerOverflow;
+    return kNone;
+}
+
+void ObjectCalibrator::releaseMarker(std::size_t marker) {
+    markers_[marker] = KnownMarker{};
+}
+
+// --- Views and export. --------------------------------------------------------------------------
+
+std::size_t ObjectCalibrator::objectCount() const {
+    return static_cast<std::size_t>(
+        std::count_if(objects_.begin(), objects_.end(), [](const Object& o) { return o.active; }));
+}
+
+std::size_t ObjectCalibrator::objectViews(std::span<CalibrationObjectView> out) const {
+    std::size_t count = 0;
+    for (const Object& o : objects_) {
+        if (!o.active || count == out.size())
+            continue;
+        CalibrationObjectView& v = out[count++];
+        v.id = o.id;
+        v.markers = o.members.size();
+        v.established = static_cast<std::size_t>(
+            std::count_if(o.members.begin(), o.members.end(), [&](const Member& m) {
+                return m.framesReliable >= config_.minModelFrames;
+            }));
+        v.visible = static_cast<std::size_t>(std::count_if(
+            o.members.begin(), o.members.end(), [](const Member& m) { return m.visible; }));
+        v.posed = o.posed;
+        v.rigFromObject = o.rigFromObject;
+    }
+    return count;
+}
+
+std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
+    std::size_t count = 0;
+    FixedVector<std::size_t, MarkerSet::kCapacity> chosen;
+    FixedVector<Vec3, MarkerSet::kCapacity> layout;
+    for (const Object& o : objects_) {
+        if (!o.active || count == out.size())
+            continue;
+        chosen.clear();
+        layout.clear();
+        for (std::size_t i = 0; i < o.members.size(); ++i)
+            if (o.members[i].framesReliable >= config_.minModelFrames) {
+                chosen.push_back(i);
+                layout.push_back(o.members[i].model_mm);
+            }
+        if (chosen.size() < config_.minModelMarkers)
+            continue;
+        MarkerModel& model = out[count];
+        model.clear();
+        model.id = static_cast<std::uint32_t>(count);
+        const RigidTransform canonicalFromObject = canonicalFrame(layout.span()).inverse();
+        for (const Vec3& p : layout)
+            model.markers_model_mm.push_back(canonicalFromObject.apply(p));
+        for (std::size_t a = 0; a < chosen.size(); ++a)
+            for (std::size_t b = a + 1; b < chosen.size(); ++b) {
+                const std::size_t i = std::min(chosen[a], chosen[b]);
+                const std::size_t j = std::max(chosen[a], chosen[b]);
+                if (!edge(o, i, j).coVisible)
+                    continue;
+                model.edges.push_back(
+                    {static_cast<std::uint16_t>(a), static_cast<std::uint16_t>(b),
+                     (model.markers_model_mm[a] - model.markers_model_mm[b]).norm()});
+            }
+        ++count;
+    }
+    computeSmin(out.first(count), config_.smin);
+    return count;
+}
+
+} // namespace edgetrack

@@ -1,0 +1,279 @@
+// Object calibration (paper section 4): learns rigid marker models while the user moves objects.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "core/bounded_vector.hpp"
+#include "core/marker_model.hpp"
+#include "core/marker_set.hpp"
+#include "core/marker_tracker.hpp"
+#include "core/pyramid_clustering.hpp"
+#include "core/rigid_transform.hpp"
+
+namespace edgetrack {
+
+/// \brief Tuning and capacities of object calibration; defaults suit hand-held objects at 100 Hz.
+struct CalibrationConfig {
+    /// Frame-to-frame correspondence that gives markers their IDs (step 1).
+    FrameToFrameConfig tracking{};
+    /// Objects (graphs) alive at once, the whole scene at the start included.
+    std::size_t maxObjects = 16;
+    /// Markers per object graph; at most MarkerSet::kCapacity (128).
+    std::size_t maxMarkersPerObject = 96;
+    /// Markers known at once over all objects, occluded ones included.
+    std::size_t maxMarkers = 512;
+    /// N of the paper: the running distance of an edge averages about this many frames.
+    double edgeWindow_frames = 10.0;
+    /// An edge breaks when its running distance departs this far from its long-run distance (mm).
+    double edgeBreak_mm = 2.0;
+    /// Markers that vanish after fewer frames than this are invalid and removed (step 3).
+    std::uint32_t minLifetime_frames = 10;
+    /// A new marker this close to an occluded marker's predicted position is that marker (mm).
+    double reappearRadius_mm = 4.0;
+    /// A marker within this of its place under the object's pose is reliable for the pose (mm).
+    double poseInlier_mm = 1.5;
+    /// Model positions are running means over about this many frames.
+    std::uint32_t modelAverage_frames = 1000;
+    /// A marker enters the exported model once seen this many frames as a reliable member.
+    std::uint32_t minModelFrames = 30;
+    /// An exported model has at least this many markers.
+    std::size_t minModelMarkers = 4;
+    /// Bounds of one clustering run (see PyramidClustering).
+    std::size_t maxCliques = 512;
+    std::size_t cliqueStepBudget = 50000;
+    SminConfig smin{};
+};
+
+/// \brief What calibration did and what did not fit, for the status view and the summary.
+struct CalibrationCounters {
+    std::uint64_t frames = 0;
+    std::uint64_t markersBorn = 0;
+    std::uint64_t markersReappeared = 0;
+    std::uint64_t invalidRemoved = 0;
+    std::uint64_t edgesBroken = 0;
+    std::uint64_t splits = 0;
+    std::uint64_t collapsed = 0;
+    std::uint64_t clusteringDeferred = 0;
+    /// Lost objects found again among new markers, and searches cut short by their budget.
+    std::uint64_t refound = 0;
+    std::uint64_t refindBudgetExhausted = 0;
+    /// Objects whose frame was started afresh because no pose agreed with three markers.
+    std::uint64_t rebased = 0;
+    /// Refused for lack of room: markers, objects, markers in an object.
+    std::uint64_t markerOverflow = 0;
+    std::uint64_t objectOverflow = 0;
+    std::uint64_t memberOverflow = 0;
+};
+
+/// \brief Progress of one object for a display: its size now.
+struct CalibrationObjectView {
+    std::uint32_t id = 0;
+    std::size_t markers = 0;
+    std::size_t established = 0;
+    std::size_t visible = 0;
+    bool posed = false;
+    /// Rig from object-graph frame (mm); meaningful when posed.
+    RigidTransform rigFromObject{};
+};
+
+/**
+ * \brief Learns the rigid marker objects in a stream of unlabelled 3D markers.
+ *
+ * Follows the seven steps of the paper's section 4.2 every frame: frame-to-frame tracking gives
+ * marker IDs; every object graph updates its elastic edges between visible markers; markers that
+ * lived only briefly are removed; graphs that lost edges are split by pyramid clustering; each
+ * object's pose is fitted to its reliable markers so that occluded markers are predicted and new
+ * markers near a prediction are recognised as reappearing; other new markers join every posed
+ * object (or, with no object in view, start a new one); objects that became a subset of another
+ * are collapsed.
+ *
+ * All storage is sized by the constructor from the configuration; update() never allocates.
+ * Whatever does not fit is refused and counted.
+ */
+class ObjectCalibrator {
+public:
+    explicit ObjectCalibrator(const CalibrationConfig& config);
+
+    /// \brief False when the configuration cannot work (e.g. too many markers per object).
+    bool isValid() const { return valid_; }
+
+    /**
+     * \brief Process one frame.
+     * \param time_s frame time (s).
+     * \param points_rig_mm this frame's markers, rig frame (mm), any order.
+     */
+    void update(double time_s, std::span<const Vec3> points_rig_mm);
+
+    /// \brief Forget everything learnt (a new calibration).
+    void reset();
+
+    /**
+     * \brief The models learnt so far: one per object with at least minModelMarkers established
+     * markers, each in its canonical frame, with co-visibility edges and S_min.
+     * \param out models to fill, each sized for maxMarkersPerObject markers.
+     * \return how many models were written (at most out.size()).
+     */
+    std::size_t exportModels(std::span<MarkerModel> out) const;
+
+    /// \brief The objects now, for a progress display.
+    std::size_t objectViews(std::span<CalibrationObjectView> out) const;
+    std::size_t objectCount() const;
+
+    /// \brief One member of an object, for diagnostics and viewers.
+    struct MemberView {
+        std::uint32_t objectId = 0;
+        std::uint32_t markerId = 0;
+        bool visible = false;
+        bool established = false;
+        /// Rig frame (mm): where it is seen, or predicted when occluded and the object is posed.
+        Vec3 position_rig_mm = Vec3::Zero();
+    };
+    /// \brief Call \a visit(const MemberView&) for every member of every object.
+    template <typename Visit>
+    void forEachMember(Visit&& visit) const {
+        for (const Object& o : objects_) {
+            if (!o.active)
+                continue;
+            for (const Member& m : o.members) {
+                MemberView v;
+                v.objectId = o.id;
+                v.markerId = markers_[m.marker].id;
+                v.visible = m.visible;
+                v.established = m.framesReliable >= config_.minModelFrames;
+                v.position_rig_mm = m.visible ? markers_[m.marker].position_rig_mm
+                                              : o.rigFromObject.apply(m.model_mm);
+                visit(v);
+            }
+        }
+    }
+
+    const CalibrationCounters& counters() const { return counters_; }
+    const ClusteringCounters& clusteringCounters() const { return clustering_.counters(); }
+    const MarkerTracker& tracker() const { return tracker_; }
+
+private:
+    enum class EdgeState : std::uint8_t { None, Active, Broken };
+    struct Edge {
+        EdgeState state = EdgeState::None;
+        bool coVisible = false;
+        std::uint32_t samples = 0;
+        double mean_mm = 0.0;
+        double recent_mm = 0.0;
+    };
+    /// A marker as calibration knows it, whether visible now or occluded.
+    struct KnownMarker {
+        bool used = false;
+        std::uint32_t id = 0;
+        /// Frame-to-frame ID bound to it this frame (0: not seen this frame).
+        std::uint32_t trackerId = 0;
+        bool visible = false;
+        Vec3 position_rig_mm = Vec3::Zero();
+        std::uint32_t framesSeen = 0;
+        std::uint32_t objectCount = 0;
+        /// Dropped from every object while visible: ignored for a while.
+        bool rejected = false;
+        std::uint64_t rejectedAtFrame = 0;
+    };
+    struct Member {
+        std::size_t marker = 0;
+        /// Position in the object graph's frame (mm): a running mean.
+        Vec3 model_mm = Vec3::Zero();
+        std::uint32_t samples = 0;
+        std::uint32_t framesReliable = 0;
+        bool visible = false;
+        bool inlier = false;
+        /// It agreed with the object's pose the last frame it was seen: its prediction holds.
+        bool wasInlier = false;
+        /// Running mean of the distance from its place under the object's pose (mm).
+        double recentResidual_mm = 0.0;
+        /// model_mm belongs to the object's current frame (false after a re-base, until seen).
+        bool verified = true;
+    };
+    struct Object {
+        bool active = false;
+        std::uint32_t id = 0;
+        BoundedVector<Member> members;
+        /// Edge between members i and j at i * stride + j (both halves kept).
+        BoundedVector<Edge> edges;
+        bool dirty = false;
+        bool posed = false;
+        RigidTransform rigFromObject{};
+        std::uint32_t age = 0;
+    };
+
+    Edge& edge(Object& o, std::size_t i, std::size_t j) { return o.edges[i * stride_ + j]; }
+    const Edge& edge(const Object& o, std::size_t i, std::size_t j) const {
+        return o.edges[i * stride_ + j];
+    }
+
+    void bindTrackedMarkers(std::span<const TrackedMarker> tracked);
+    void removeInvalidMarkers();
+    void updateObject(Object& o);
+    void fitPose(Object& o, bool remeasure = false);
+    std::optional<RigidTransform> consensusPose();
+    void rebase(Object& o);
+    void clusterObject(std::size_t objectIndex);
+    bool hasActiveEdge(const Object& o, std::size_t member) const;
+    void recogniseReappearing(std::span<const TrackedMarker> tracked);
+    void insertNewMarkers(std::span<const TrackedMarker> tracked);
+    void collapseObjects();
+    void refind(Object& o);
+
+    Object* newObject();
+    void deactivate(Object& o);
+    bool addMember(Object& o, std::size_t marker, const Vec3& model_mm);
+    void removeMember(Object& o, std::size_t member);
+    std::size_t newMarker(std::uint32_t trackerId, const Vec3& position_rig_mm);
+    void releaseMarker(std::size_t marker);
+    void rebuildTrackerIndex();
+    std::size_t findByTrackerId(std::uint32_t trackerId) const;
+
+    CalibrationConfig config_;
+    bool valid_ = false;
+    std::size_t stride_ = 0;
+    MarkerTracker tracker_;
+    PyramidClustering clustering_;
+    CalibrationCounters counters_{};
+    std::vector<Object> objects_;
+    BoundedVector<KnownMarker> markers_;
+    /// (trackerId, marker) sorted by trackerId, for the markers seen last frame.
+    BoundedVector<std::pair<std::uint32_t, std::size_t>> byTrackerId_;
+    /// Per tracked marker of this frame: the known marker it is, or kNone.
+    BoundedVector<std::size_t> knownOfTracked_;
+    /// Scratch of the size of one object.
+    BoundedVector<Vec3> fitFrom_;
+    BoundedVector<Vec3> fitTo_;
+    BoundedVector<std::size_t> fitMember_;
+    BoundedVector<double> residual_;
+    FixedVector<MarkerSet, MarkerSet::kCapacity> adjacency_;
+    BoundedVector<std::uint32_t> stamp_;
+    BoundedVector<std::size_t> candidates_;
+    struct MemberPair {
+        double distance_mm = 0.0;
+        std::size_t i = 0;
+        std::size_t j = 0;
+    };
+    BoundedVector<MemberPair> memberPairs_;
+    std::uint32_t stampValue_ = 0;
+    double edgeAlpha_ = 0.2;
+    std::uint32_t nextMarkerId_ = 1;
+    std::uint32_t nextObjectId_ = 0;
+    bool structureChanged_ = false;
+
+    static constexpr std::size_t kConsensusTries = 40;
+    static constexpr double kEstablishedVote = 10.0;
+    /// A marker dropped from every object gets another chance to join one after this long: it
+    /// may have been dropped while the objects around it were still splitting.
+    static constexpr std::uint64_t kRetryRejected_frames = 100;
+    /// A lost object is found again from at least this many of its markers.
+    static constexpr std::size_t kRefindMinMarkers = 4;
+    /// Inner steps of one search for a lost object, so that a flood of new points cannot stall.
+    static constexpr std::size_t kRefindBudget = 200000;
+    static constexpr std::size_t kNone = static_cast<std::size_t>(-1);
+};
+
+} // namespace edgetrack

@@ -1,0 +1,395 @@
+// Measures object calibration on simulated scenes against the true marker layouts.
+//
+//   eval_calibration --scene cube_sphere --frames 4000 [--seed 1] [--level images|points]
+//                    [--require-objects N] [--require-rms 0.3] [--require-complete]
+//
+// Runs the core pipeline (images level: render, blob detection, stereo; points level: the
+// simulator's points) into the ObjectCalibrator, exports its models, aligns each to the true
+// layout it matches best and reports per object: markers found, duplicates, false markers and the
+// RMS position error. Every second it also exports the models so far and reports when they first
+// held every marker that was in view for at least --min-seen-s seconds. Exits 1 on a missed target.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "core/blob_detector.hpp"
+#include "core/object_calibrator.hpp"
+#include "core/rigid_fit.hpp"
+#include "core/stereo_matcher.hpp"
+#include "hal/sim/levels.hpp"
+#include "hal/sim/world.hpp"
+
+using namespace edgetrack;
+
+namespace {
+
+// Tolerances of the comparison with truth (mm).
+constexpr double kMatch_mm = 1.5;
+
+struct Alignment {
+    int object = -1;
+    RigidTransform truthFromModel{};
+    // model marker -> truth marker (or -1)
+    std::vector<int> truthOf;
+    std::size_t matched = 0;
+    double rms_mm = 0.0;
+};
+
+// Best alignment of a model with a true layout: from congruent triangles, refined by a fit of
+// every matched pair.
+Alignment align(const MarkerModel& model, const std::vector<Vec3>& truth, int object) {
+    Alignment best;
+    best.object = object;
+    const auto& pm = model.markers_model_mm;
+    const std::size_t n = pm.size();
+    auto evaluate = [&](const RigidTransform& t, Alignment& out) {
+        out.truthOf.assign(n, -1);
+        out.matched = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            double bestD = kMatch_mm;
+            for (std::size_t j = 0; j < truth.size(); ++j) {
+                const double d = (t.apply(pm[i]) - truth[j]).norm();
+                if (d < bestD) {
+                    bestD = d;
+                    out.truthOf[i] = static_cast<int>(j);
+                }
+            }
+            out.matched += out.truthOf[i] >= 0 ? 1u : 0u;
+        }
+    };
+    for (const ModelEdge& e : model.edges) {
+        const double dab = (pm[e.from] - pm[e.to]).norm();
+        for (std::size_t k = 0; k < n; ++k) {
+            if (k == e.from || k == e.to)
+                continue;
+            const double dak = (pm[e.from] - pm[k]).norm();
+            const double dbk = (pm[e.to] - pm[k]).norm();
+            if (std::min(dak, dbk) < 10.0)
+                continue;
+            for (std::size_t a = 0; a < truth.size(); ++a)
+                for (std::size_t b = 0; b < truth.size(); ++b) {
+                    if (a == b || std::abs((truth[a] - truth[b]).norm() - dab) > kMatch_mm)
+                        continue;
+                    for (std::size_t c = 0; c < truth.size(); ++c) {
+                        if (c == a || c == b ||
+                            std::abs((truth[a] - truth[c]).norm() - dak) > kMatch_mm ||
+                            std::abs((truth[b] - truth[c]).norm() - dbk) > kMatch_mm)
+                            continue;
+                        const Vec3 from[3] = {pm[e.from], pm[e.to], pm[k]};
+                        const Vec3 to[3] = {truth[a], truth[b], truth[c]};
+                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        if (!fit)
+                            continue;
+                        Alignment candidate;
+                        candidate.object = object;
+                        evaluate(fit->transform, candidate);
+                        if (candidate.matched > best.matched) {
+                            candidate.truthFromModel = fit->transform;
+                            best = candidate;
+                        }
+                    }
+                }
+        }
+        if (best.matched == n)
+            break;
+    }
+    if (best.matched >= 3) {
+        for (int round = 0; round < 2; ++round) {
+            std::vector<Vec3> from, to;
+            for (std::size_t i = 0; i < n; ++i)
+                if (best.truthOf[i] >= 0) {
+                    from.push_back(pm[i]);
+                    to.push_back(truth[static_cast<std::size_t>(best.truthOf[i])]);
+                }
+            if (const std::optional<RigidFit> fit = fitRigid(from, to)) {
+                best.truthFromModel = fit->transform;
+                best.rms_mm = fit->rms_mm;
+                evaluate(fit->transform, best);
+            }
+        }
+    }
+    return best;
+}
+
+struct ObjectReport {
+    std::size_t expected = 0; // markers in view long enough
+    std::size_t found = 0;    // of those, in the model
+    std::size_t duplicates = 0;
+    int models = 0; // models aligned to this object
+    double rms_mm = 0.0;
+};
+
+struct Report {
+    std::vector<ObjectReport> objects;
+    std::size_t models = 0;
+    std::size_t falseMarkers = 0; // model markers on no true marker
+    std::size_t strayModels = 0;  // models that match no object
+};
+
+Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vector<Vec3>>& layouts,
+                const std::vector<std::vector<bool>>& expected) {
+    Report r;
+    r.models = models.size();
+    r.objects.resize(layouts.size());
+    std::vector<std::vector<int>> hits(layouts.size());
+    for (std::size_t k = 0; k < layouts.size(); ++k) {
+        hits[k].assign(layouts[k].size(), 0);
+        r.objects[k].expected =
+            static_cast<std::size_t>(std::count(expected[k].begin(), expected[k].end(), true));
+    }
+    std::vector<double> squared(layouts.size(), 0.0);
+    std::vector<std::size_t> squaredCount(layouts.size(), 0);
+    for (const MarkerModel& model : models) {
+        Alignment best;
+        for (std::size_t k = 0; k < layouts.size(); ++k) {
+            Alignment a = align(model, layouts[k], static_cast<int>(k));
+            if (a.matched > best.matched)
+                best = a;
+        }
+        if (best.matched < 4) {
+            ++r.strayModels;
+            r.falseMarkers += model.markers_model_mm.size();
+            continue;
+        }
+        const auto k = static_cast<std::size_t>(best.object);
+        ++r.objects[k].models;
+        for (std::size_t i = 0; i < best.truthOf.size(); ++i) {
+            if (best.truthOf[i] < 0) {
+                ++r.falseMarkers;
+                continue;
+            }
+            ++hits[k][static_cast<std::size_t>(best.truthOf[i])];
+            const double d = (best.truthFromModel.apply(model.markers_model_mm[i]) -
+                              layouts[k][static_cast<std::size_t>(best.truthOf[i])])
+                                 .squaredNorm();
+            squared[k] += d;
+            ++squaredCount[k];
+        }
+    }
+    for (std::size_t k = 0; k < layouts.size(); ++k) {
+        for (std::size_t m = 0; m < layouts[k].size(); ++m) {
+            if (hits[k][m] > 1)
+                r.objects[k].duplicates += static_cast<std::size_t>(hits[k][m] - 1);
+            if (expected[k][m] && hits[k][m] > 0)
+                ++r.objects[k].found;
+        }
+        r.objects[k].rms_mm =
+            squaredCount[k] ? std::sqrt(squared[k] / static_cast<double>(squaredCount[k])) : 0.0;
+    }
+    return r;
+}
+
+bool complete(const Report& r) {
+    for (const ObjectReport& o : r.objects)
+        if (o.expected > 0 && (o.found < o.expected || o.models != 1 || o.duplicates > 0))
+            return false;
+    return r.strayModels == 0;
+}
+
+} // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"Object calibration quality on a simulated scene"};
+    std::string sceneName = "cube_sphere";
+    std::int64_t frames = 3000;
+    std::uint64_t seed = 1;
+    std::string level = "images";
+    double minSeen_s = 2.0;
+    int requireObjects = -1;
+    double requireRms = -1.0;
+    bool requireComplete = false;
+    bool verbose = false;
+    app.add_option("--scene", sceneName);
+    app.add_option("--frames", frames)->check(CLI::PositiveNumber);
+    app.add_option("--seed", seed);
+    app.add_option("--level", level)->check(CLI::IsMember({"images", "points"}));
+    app.add_option("--min-seen-s", minSeen_s, "a marker in view this long must be in the model");
+    app.add_option("--require-objects", requireObjects, "models that must come out");
+    app.add_option("--require-rms", requireRms, "maximum marker RMS error after alignment (mm)");
+    app.add_flag("--require-complete", requireComplete,
+                 "every marker in view long enough found exactly once, no stray models");
+    app.add_flag("--verbose", verbose, "print the objects every second");
+    CalibrationConfig config;
+    app.add_option("--edge-break", config.edgeBreak_mm, "edge break threshold (mm)");
+    app.add_option("--edge-window", config.edgeWindow_frames, "N of the running distance");
+    CLI11_PARSE(app, argc, argv);
+
+    std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
+    if (!scene) {
+        std::fprintf(stderr, "unknown scene %s\n", sceneName.c_str());
+        return 2;
+    }
+    const sim::World world(std::move(*scene), seed);
+    const sim::RigSpec& rigSpec = world.scene().rig;
+    const sim::FrameRenderer renderer(rigSpec.width_px, rigSpec.height_px,
+                                      world.scene().background_dn, world.scene().noiseSigma_dn,
+                                      seed);
+    const BlobDetectorConfig blobConfig;
+    BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
+    BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
+    const StereoConfig stereoConfig;
+    StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
+    ObjectCalibrator calibrator(config);
+    std::vector<MarkerModel> models;
+    for (std::size_t i = 0; i < config.maxObjects; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+
+    std::vector<std::vector<Vec3>> layouts;
+    std::vector<std::vector<int>> framesSeen;
+    for (const sim::SceneObject& o : world.scene().objects) {
+        layouts.emplace_back();
+        for (const sim::SimMarker& m : o.object.markers)
+            layouts.back().push_back(m.position_object_mm);
+        framesSeen.emplace_back(o.object.markers.size(), 0);
+    }
+
+    std::vector<std::uint8_t> image0(
+        static_cast<std::size_t>(rigSpec.width_px * rigSpec.height_px));
+    std::vector<std::uint8_t> image1(image0.size());
+    BoundedVector<Blob> blobs0(blobConfig.maxBlobs), blobs1(blobConfig.maxBlobs);
+    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
+    std::vector<Vec3> points;
+    sim::Observation observation;
+    std::vector<int> visible;
+    sim::Random random(seed ^ 0x5eedU);
+    const sim::LevelNoise noise;
+    const auto perSecond = static_cast<std::int64_t>(world.scene().frameRate_hz);
+    std::vector<std::pair<double, std::vector<MarkerModel>>> checkpoints;
+
+    for (std::int64_t f = 0; f < frames; ++f) {
+        const auto frame = static_cast<std::uint64_t>(f);
+        world.observe(frame, observation);
+        points.clear();
+        if (level == "images") {
+            renderer.render(image0, rigSpec.width_px, 0, observation, 1.0, frame);
+            renderer.render(image1, rigSpec.width_px, 1, observation, 1.0, frame);
+            detector0.detect(image0.data(), rigSpec.width_px, blobs0);
+            detector1.detect(image1.data(), rigSpec.width_px, blobs1);
+            stereo.match(blobs0.span(), blobs1.span(), markers);
+            for (const StereoMarker& m : markers)
+                points.push_back(m.position_rig_mm);
+        } else {
+            sim::pointsFromObservation(observation, noise, random, points);
+        }
+        calibrator.update(observation.time_s, points);
+        sim::separatelyVisible(observation, visible);
+        for (const int source : visible)
+            if (static_cast<std::size_t>(source) < observation.markers.size()) {
+                const sim::MarkerView& m = observation.markers[static_cast<std::size_t>(source)];
+                ++framesSeen[static_cast<std::size_t>(m.object)]
+                            [static_cast<std::size_t>(m.marker)];
+            }
+        if ((f + 1) % perSecond == 0) {
+            const std::size_t count = calibrator.exportModels(models);
+            if (verbose) {
+                std::vector<CalibrationObjectView> views(config.maxObjects);
+                const std::size_t n = calibrator.objectViews(views);
+                std::printf("%6.1f s:", static_cast<double>(f + 1) / world.scene().frameRate_hz);
+                for (std::size_t i = 0; i < n; ++i)
+                    std::printf(" [#%u %zu/%zu est, %zu vis%s]", views[i].id, views[i].markers,
+                                views[i].established, views[i].visible,
+                                views[i].posed ? "" : " lost");
+                std::printf("\n");
+                // Which true markers each object holds (visible members only): "object:marker".
+                std::map<std::uint32_t, std::string> held;
+                calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
+                    if (!v.visible)
+                        return;
+                    std::string label = "?";
+                    for (const sim::MarkerView& m : observation.markers)
+                        if ((m.position_rig_mm - v.position_rig_mm).norm() < 1.0)
+                            label = std::to_string(m.object) + ":" + std::to_string(m.marker);
+                    held[v.objectId] += " " + label;
+                });
+                for (const auto& [id, labels] : held)
+                    std::printf("     #%u:%s\n", id, labels.c_str());
+            }
+            std::vector<MarkerModel> copy;
+            for (std::size_t i = 0; i < count; ++i) {
+                copy.emplace_back(config.maxMarkersPerObject);
+                copy.back().assign(models[i]);
+            }
+            checkpoints.emplace_back(static_cast<double>(f + 1) / world.scene().frameRate_hz,
+                                     std::move(copy));
+        }
+    }
+
+    const auto minFrames = static_cast<int>(minSeen_s * world.scene().frameRate_hz);
+    std::vector<std::vector<bool>> expected;
+    for (const std::vector<int>& seen : framesSeen) {
+        expected.emplace_back();
+        for (int n : seen)
+            expected.back().push_back(n >= minFrames);
+    }
+    const std::size_t count = calibrator.exportModels(models);
+    const Report final = evaluate(std::span(models).first(count), layouts, expected);
+    double completeAt = -1.0;
+    for (const auto& [time_s, saved] : checkpoints)
+        if (complete(evaluate(saved, layouts, expected))) {
+            completeAt = time_s;
+            break;
+        }
+
+    const CalibrationCounters& c = calibrator.counters();
+    std::printf("scene %s, %lld frames (%.1f s), level %s, seed %llu\n", sceneName.c_str(),
+                static_cast<long long>(frames),
+                static_cast<double>(frames) / world.scene().frameRate_hz, level.c_str(),
+                static_cast<unsigned long long>(seed));
+    std::printf("models %zu (objects in scene %zu), stray models %zu, false markers %zu\n",
+                final.models, layouts.size(), final.strayModels, final.falseMarkers);
+    for (std::size_t k = 0; k < final.objects.size(); ++k) {
+        const ObjectReport& o = final.objects[k];
+        std::printf("  object %zu (%s, %zu markers): models %d, found %zu of %zu in view >= %.1f s,"
+                    " duplicates %zu, RMS %.3f mm\n",
+                    k, world.scene().objects[k].object.name.c_str(), layouts[k].size(), o.models,
+                    o.found, o.expected, minSeen_s, o.duplicates, o.rms_mm);
+    }
+    for (std::size_t i = 0; i < count; ++i)
+        std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
+                    models[i].markers_model_mm.size(), models[i].edges.size(), models[i].sMin,
+                    models[i].sameShapeAs >= 0 ? " (same shape as another)" : "");
+    if (completeAt >= 0.0)
+        std::printf("complete after %.0f s of motion\n", completeAt);
+    else
+        std::printf("never complete\n");
+    std::printf(
+        "counters: born %llu, reappeared %llu, invalid %llu, edges broken %llu, splits %llu,"
+        " collapsed %llu, deferred %llu, refound %llu (budget out %llu), rebased %llu,"
+        " overflow m/o/mem %llu/%llu/%llu\n",
+        static_cast<unsigned long long>(c.markersBorn),
+        static_cast<unsigned long long>(c.markersReappeared),
+        static_cast<unsigned long long>(c.invalidRemoved),
+        static_cast<unsigned long long>(c.edgesBroken), static_cast<unsigned long long>(c.splits),
+        static_cast<unsigned long long>(c.collapsed),
+        static_cast<unsigned long long>(c.clusteringDeferred),
+        static_cast<unsigned long long>(c.refound),
+        static_cast<unsigned long long>(c.refindBudgetExhausted),
+        static_cast<unsigned long long>(c.rebased),
+        static_cast<unsigned long long>(c.markerOverflow),
+        static_cast<unsigned long long>(c.objectOverflow),
+        static_cast<unsigned long long>(c.memberOverflow));
+
+    int status = 0;
+    if (requireObjects >= 0 && final.models != static_cast<std::size_t>(requireObjects)) {
+        std::printf("FAIL: %zu models, expected %d\n", final.models, requireObjects);
+        status = 1;
+    }
+    if (requireRms >= 0.0)
+        for (std::size_t k = 0; k < final.objects.size(); ++k)
+            if (final.objects[k].rms_mm > requireRms || final.objects[k].models == 0) {
+                std::printf("FAIL: object %zu RMS %.3f mm (limit %.3f)\n", k,
+                            final.objects[k].rms_mm, requireRms);
+                status = 1;
+            }
+    if (requireComplete && !complete(final)) {
+        std::printf("FAIL: models incomplete, duplicated or stray\n");
+        status = 1;
+    }
+    return status;
+}

@@ -1,0 +1,121 @@
+// Tests of marker models: canonical frames and S_min from congruences.
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/marker_model.hpp"
+
+namespace edgetrack {
+namespace {
+
+MarkerModel fullyConnected(const std::vector<Vec3>& layout) {
+    MarkerModel model(layout.size());
+    for (const Vec3& p : layout)
+        model.markers_model_mm.push_back(p);
+    for (std::size_t i = 0; i < layout.size(); ++i)
+        for (std::size_t j = i + 1; j < layout.size(); ++j)
+            model.edges.push_back({static_cast<std::uint16_t>(i), static_cast<std::uint16_t>(j),
+                                   (layout[i] - layout[j]).norm()});
+    return model;
+}
+
+std::vector<Vec3> irregularLayout(std::size_t count, unsigned seed) {
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
+    std::vector<Vec3> layout;
+    while (layout.size() < count) {
+        const Vec3 p(coordinate(random), coordinate(random), coordinate(random));
+        bool apart = true;
+        for (const Vec3& q : layout)
+            apart = apart && (p - q).norm() > 12.0;
+        if (apart)
+            layout.push_back(p);
+    }
+    return layout;
+}
+
+TEST(CanonicalFrame, IsTheSameWhereverTheLayoutWasMeasured) {
+    const std::vector<Vec3> layout = irregularLayout(10, 3);
+    RigidTransform motion;
+    motion.rotation = quaternionFromWxyz(0.3, -0.5, 0.7, 0.1);
+    motion.translation_mm = Vec3(120.0, -40.0, 560.0);
+    std::vector<Vec3> moved;
+    for (const Vec3& p : layout)
+        moved.push_back(motion.apply(p));
+    const RigidTransform a = canonicalFrame(layout).inverse();
+    const RigidTransform b = canonicalFrame(moved).inverse();
+    for (std::size_t i = 0; i < layout.size(); ++i)
+        EXPECT_LT((a.apply(layout[i]) - b.apply(moved[i])).norm(), 1e-9);
+    // The origin is the centroid.
+    Vec3 centroid = Vec3::Zero();
+    for (const Vec3& p : layout)
+        centroid += a.apply(p);
+    EXPECT_LT(centroid.norm() / static_cast<double>(layout.size()), 1e-9);
+}
+
+TEST(Smin, IrregularLayoutNeedsOnlyTheFloor) {
+    MarkerModel model = fullyConnected(irregularLayout(8, 5));
+    computeSmin(std::span(&model, 1), SminConfig{});
+    EXPECT_EQ(model.sMin, 4u);
+    EXPECT_EQ(model.sameShapeAs, -1);
+}
+
+TEST(Smin, SymmetricLayoutCannotBeIdentifiedByAnySubset) {
+    // Two squares, one above the other and turned by 45 degrees: a quarter turn maps all eight
+    // markers onto each other, so no number of them fixes the orientation.
+    std::vector<Vec3> layout;
+    for (int k = 0; k < 4; ++k) {
+        const double a = k * M_PI / 2.0;
+        layout.emplace_back(30.0 * std::cos(a), 30.0 * std::sin(a), 0.0);
+        layout.emplace_back(20.0 * std::cos(a + M_PI / 4.0), 20.0 * std::sin(a + M_PI / 4.0), 25.0);
+    }
+    MarkerModel model = fullyConnected(layout);
+    computeSmin(std::span(&model, 1), SminConfig{});
+    EXPECT_EQ(model.sMin, 8u);
+}
+
+TEST(Smin, PartialSymmetryRaisesSminAboveTheSymmetricPart) {
+    // A symmetric square of four plus two markers that break the symmetry: four markers fit two
+    // ways, so identifying it takes five.
+    std::vector<Vec3> layout{{30, 0, 0},  {0, 30, 0},  {-30, 0, 0},
+                             {0, -30, 0}, {12, 5, 35}, {-20, 14, 52}};
+    MarkerModel model = fullyConnected(layout);
+    computeSmin(std::span(&model, 1), SminConfig{});
+    EXPECT_EQ(model.sMin, 5u);
+}
+
+TEST(Smin, IdenticalModelsAreMarkedAsTheSameShape) {
+    const std::vector<Vec3> layout = irregularLayout(9, 11);
+    std::vector<MarkerModel> models;
+    models.push_back(fullyConnected(layout));
+    models.push_back(fullyConnected(layout));
+    models.push_back(fullyConnected(irregularLayout(9, 12)));
+    computeSmin(models, SminConfig{});
+    EXPECT_EQ(models[0].sameShapeAs, 1);
+    EXPECT_EQ(models[1].sameShapeAs, 0);
+    EXPECT_EQ(models[2].sameShapeAs, -1);
+    // A copy does not raise S_min: with the third model alone beside it, the copy's S_min is the
+    // same as when the two copies are together.
+    std::vector<MarkerModel> pair;
+    pair.push_back(fullyConnected(layout));
+    pair.push_back(fullyConnected(irregularLayout(9, 12)));
+    computeSmin(pair, SminConfig{});
+    EXPECT_EQ(models[0].sMin, pair[0].sMin);
+    EXPECT_EQ(models[1].sMin, pair[0].sMin);
+}
+
+TEST(MarkerModel, AssignRefusesWhatDoesNotFit) {
+    MarkerModel big = fullyConnected(irregularLayout(8, 2));
+    MarkerModel small(4);
+    EXPECT_FALSE(small.assign(big));
+    MarkerModel roomy(16);
+    ASSERT_TRUE(roomy.assign(big));
+    EXPECT_EQ(roomy.markers_model_mm.size(), 8u);
+    EXPECT_EQ(roomy.edges.size(), 28u);
+    EXPECT_TRUE(roomy.hasEdge(7, 2));
+}
+
+} // namespace
+} // namespace edgetrack

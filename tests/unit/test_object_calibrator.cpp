@@ -1,0 +1,207 @@
+// Tests of object calibration on synthetic rigid layouts moving apart, with occlusion and noise.
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "core/object_calibrator.hpp"
+#include "tests/support/alloc_guard.hpp"
+
+namespace edgetrack {
+namespace {
+
+std::vector<Vec3> irregularLayout(std::size_t count, unsigned seed) {
+    std::mt19937 random(seed);
+    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
+    std::vector<Vec3> layout;
+    while (layout.size() < count) {
+        const Vec3 p(coordinate(random), coordinate(random), coordinate(random));
+        bool apart = true;
+        for (const Vec3& q : layout)
+            apart = apart && (p - q).norm() > 15.0;
+        if (apart)
+            layout.push_back(p);
+    }
+    return layout;
+}
+
+// Rig-from-object pose of a body turning about its own axis while drifting (mm, rad, s).
+RigidTransform poseAt(double t_s, const Vec3& centre, const Vec3& axis, double rate_radps,
+                      double phase) {
+    RigidTransform pose;
+    pose.rotation = Quat(Eigen::AngleAxisd(rate_radps * t_s + phase, axis.normalized()));
+    pose.translation_mm = centre + Vec3(30.0 * std::sin(0.7 * t_s + phase),
+                                        20.0 * std::cos(0.5 * t_s), 15.0 * std::sin(0.3 * t_s));
+    return pose;
+}
+
+std::vector<double> sortedDistances(std::span<const Vec3> points) {
+    std::vector<double> d;
+    for (std::size_t i = 0; i < points.size(); ++i)
+        for (std::size_t j = i + 1; j < points.size(); ++j)
+            d.push_back((points[i] - points[j]).norm());
+    std::sort(d.begin(), d.end());
+    return d;
+}
+
+// Same layout up to a rigid motion and marker order: every pairwise distance agrees.
+bool sameShape(std::span<const Vec3> a, std::span<const Vec3> b, double tolerance_mm) {
+    if (a.size() != b.size())
+        return false;
+    const std::vector<double> da = sortedDistances(a), db = sortedDistances(b);
+    for (std::size_t i = 0; i < da.size(); ++i)
+        if (std::abs(da[i] - db[i]) > tolerance_mm)
+            return false;
+    return true;
+}
+
+class TwoBodies : public ::testing::Test {
+protected:
+    // Markers of body k visible at time t: a body hides the markers on its far side, as an
+    // object's own surface does, when `selfOcclusion` is set.
+    void frame(double t_s, bool selfOcclusion, std::vector<Vec3>& points) {
+        points.clear();
+        for (std::size_t k = 0; k < 2; ++k) {
+            const RigidTransform pose =
+                k == 0 ? poseAt(t_s, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0)
+                       : poseAt(t_s, {70.0, 10.0, 560.0}, {1.0, 0.3, -0.2}, -0.6, 1.3);
+            for (const Vec3& m : layouts[k]) {
+                const Vec3 p = pose.apply(m);
+                // Facing away from the cameras (at the rig origin): hidden behind the body.
+                if (selfOcclusion && (p - pose.translation_mm).dot(-p.normalized()) < -15.0)
+                    continue;
+                points.push_back(p + Vec3(noise(random), noise(random), noise(random)));
+            }
+        }
+        std::shuffle(points.begin(), points.end(), random);
+    }
+
+    std::vector<Vec3> layouts[2] = {irregularLayout(12, 1), irregularLayout(10, 2)};
+    std::mt19937 random{42};
+    std::normal_distribution<double> noise{0.0, 0.05};
+};
+
+TEST_F(TwoBodies, LearnsTwoRigidObjectsThatMoveApart) {
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    ASSERT_TRUE(calibrator.isValid());
+    std::vector<Vec3> points;
+    for (int f = 0; f < 1500; ++f) {
+        frame(f / 100.0, false, points);
+        calibrator.update(f / 100.0, points);
+    }
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    const std::size_t count = calibrator.exportModels(models);
+    ASSERT_EQ(count, 2u);
+    int matched[2] = {0, 0};
+    for (std::size_t i = 0; i < count; ++i)
+        for (int k = 0; k < 2; ++k)
+            if (sameShape(models[i].markers_model_mm.span(), layouts[k], 0.2))
+                ++matched[k];
+    EXPECT_EQ(matched[0], 1);
+    EXPECT_EQ(matched[1], 1);
+    EXPECT_GT(calibrator.counters().splits, 0u);
+    for (std::size_t i = 0; i < count; ++i) {
+        // All markers seen together: every pair is an edge.
+        const std::size_t n = models[i].markers_model_mm.size();
+        EXPECT_EQ(models[i].edges.size(), n * (n - 1) / 2);
+        EXPECT_GE(models[i].sMin, 4u);
+    }
+}
+
+TEST_F(TwoBodies, OccludedMarkersAreRecognisedWhenTheyReappear) {
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<Vec3> points;
+    for (int f = 0; f < 3000; ++f) {
+        frame(f / 100.0, true, points);
+        calibrator.update(f / 100.0, points);
+    }
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    const std::size_t count = calibrator.exportModels(models);
+    ASSERT_EQ(count, 2u);
+    int matched[2] = {0, 0};
+    for (std::size_t i = 0; i < count; ++i)
+        for (int k = 0; k < 2; ++k)
+            if (sameShape(models[i].markers_model_mm.span(), layouts[k], 0.2))
+                ++matched[k];
+    EXPECT_EQ(matched[0], 1);
+    EXPECT_EQ(matched[1], 1);
+    EXPECT_GT(calibrator.counters().markersReappeared, 20u);
+}
+
+TEST_F(TwoBodies, ShortLivedReflectionsDoNotBecomeMarkers) {
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<Vec3> points;
+    std::uniform_real_distribution<double> place(-100.0, 100.0);
+    Vec3 glint = Vec3::Zero();
+    for (int f = 0; f < 1500; ++f) {
+        frame(f / 100.0, false, points);
+        // A glint appears for three frames every half second, somewhere new each time.
+        if (f % 50 == 0)
+            glint = Vec3(place(random), place(random), 550.0 + place(random));
+        if (f % 50 < 3)
+            points.push_back(glint);
+        calibrator.update(f / 100.0, points);
+    }
+    EXPECT_GT(calibrator.counters().invalidRemoved, 20u);
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    const std::size_t count = calibrator.exportModels(models);
+    ASSERT_EQ(count, 2u);
+    std::size_t total = 0;
+    for (std::size_t i = 0; i < count; ++i)
+        total += models[i].markers_model_mm.size();
+    EXPECT_EQ(total, 22u);
+}
+
+TEST_F(TwoBodies, NoHeapAllocationPerFrameAfterWarmUp) {
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<std::vector<Vec3>> frames(1200);
+    for (std::size_t f = 0; f < frames.size(); ++f)
+        frame(static_cast<double>(f) / 100.0, true, frames[f]);
+    for (std::size_t f = 0; f < 200; ++f)
+        calibrator.update(static_cast<double>(f) / 100.0, frames[f]);
+    const std::uint64_t allocations = test::countAllocations([&] {
+        for (std::size_t f = 200; f < frames.size(); ++f)
+            calibrator.update(static_cast<double>(f) / 100.0, frames[f]);
+    });
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_EQ(calibrator.counters().frames, 1200u);
+}
+
+TEST(ObjectCalibrator, RefusesMoreMarkersPerObjectThanItsSetsHold) {
+    CalibrationConfig config;
+    config.maxMarkersPerObject = MarkerSet::kCapacity + 1;
+    ObjectCalibrator calibrator(config);
+    EXPECT_FALSE(calibrator.isValid());
+    const Vec3 p(0.0, 0.0, 500.0);
+    calibrator.update(0.0, std::span(&p, 1)); // harmless when invalid
+    EXPECT_EQ(calibrator.objectCount(), 0u);
+}
+
+TEST(ObjectCalibrator, MarkersBeyondCapacityAreCountedNotStored) {
+    CalibrationConfig config;
+    config.maxMarkers = 120;
+    config.maxMarkersPerObject = 100;
+    ObjectCalibrator calibrator(config);
+    ASSERT_TRUE(calibrator.isValid());
+    std::vector<Vec3> points;
+    for (int i = 0; i < 150; ++i)
+        points.emplace_back(20.0 * (i % 10), 20.0 * (i / 10), 600.0);
+    calibrator.update(0.0, points);
+    EXPECT_EQ(calibrator.counters().markerOverflow, 30u);
+    EXPECT_EQ(calibrator.counters().memberOverflow, 20u);
+}
+
+} // namespace
+} // namespace edgetrack
