@@ -10,6 +10,12 @@ add_library(tomlplusplus_header_only INTERFACE)
 target_include_directories(tomlplusplus_header_only SYSTEM INTERFACE ${TOMLPLUSPLUS_INCLUDE_DIR})
 target_compile_definitions(tomlplusplus_header_only INTERFACE TOML_HEADER_ONLY=1 TOML_EXCEPTIONS=0)
 
+# nlohmann/json reads and writes the model files of INTERFACES §4 (offline tools only; the board
+# keeps models in its own binary format). Header-only like toml++.
+find_path(NLOHMANN_JSON_INCLUDE_DIR nlohmann/json.hpp REQUIRED)
+add_library(nlohmann_json_header_only INTERFACE)
+target_include_directories(nlohmann_json_header_only SYSTEM INTERFACE ${NLOHMANN_JSON_INCLUDE_DIR})
+
 # NEON intrinsics: native on aarch64, translated by SIMDe everywhere else.
 if(NOT CMAKE_SYSTEM_PROCESSOR MATCHES "^(aarch64|arm64|ARM64)$")
     find_path(SIMDE_INCLUDE_DIR simde/arm/neon.h REQUIRED)

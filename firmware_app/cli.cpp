@@ -2,12 +2,15 @@
 #include "firmware_app/cli.hpp"
 
 #include <cstdint>
+#include <iostream>
 #include <optional>
 #include <string>
+#include <unistd.h>
 #include <vector>
 
 #include <CLI/CLI.hpp>
 
+#include "firmware_app/calibrate_command.hpp"
 #include "firmware_app/reconstruct_command.hpp"
 #include "firmware_app/recording/recording.hpp"
 #include "firmware_app/sim_command.hpp"
@@ -174,8 +177,20 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         }
         return 0;
     }
-    if (calibrateCommand->parsed())
-        return notBuilt(err, "calibrate", 5);
+    if (calibrateCommand->parsed()) {
+        CalibrateOptions options;
+        options.input = calibrate.input;
+        options.out = calibrate.out;
+        if (!calibrate.from.empty())
+            options.from = recording::parseLevel(calibrate.from);
+        // Progress is for a person watching a terminal, not for logs or tests.
+        options.showProgress = &err == &std::cerr && ::isatty(STDERR_FILENO) != 0;
+        if (Status s = runCalibrate(options, out, err); !s) {
+            err << "edgetrack calibrate: " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        return 0;
+    }
     if (trackCommand->parsed())
         return notBuilt(err, "track", 6);
     if (modelCommand->parsed())

@@ -5,8 +5,7 @@
 #include <map>
 #include <vector>
 
-#include "core/blob_detector.hpp"
-#include "core/stereo_matcher.hpp"
+#include "firmware_app/frame_source.hpp"
 
 namespace edgetrack::app {
 
@@ -43,6 +42,9 @@ Status copyTruth(const fs::path& input, const fs::path& out) {
 } // namespace
 
 Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) {
+    if (isC3dFile(options.input))
+        return Error{options.input.string() +
+                     ": a C3D file holds only points; reconstruct needs images or blobs"};
     Result<recording::Inventory> inventory = recording::inspect(options.input);
     if (!inventory)
         return inventory.error();
@@ -59,69 +61,23 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
         recording::readFrames(options.input / "frames.csv");
     if (!frames)
         return frames.error();
-
-    // Blob rows of the input, grouped by frame (blobs level only).
-    std::map<std::int64_t, std::vector<recording::BlobRow>> inputBlobs;
-    if (*level == Level::Blobs) {
-        Result<std::vector<recording::BlobRow>> rows =
-            recording::readBlobs(options.input / "blobs.csv");
-        if (!rows)
-            return rows.error();
-        std::map<std::int64_t, bool> known;
-        for (const recording::FrameRow& f : *frames)
-            known[f.frame] = true;
-        for (const recording::BlobRow& row : *rows) {
-            if (!known.contains(row.frame))
-                return Error{(options.input / "blobs.csv").string() + ": frame " +
-                             std::to_string(row.frame) + " is not in frames.csv"};
-            inputBlobs[row.frame].push_back(row);
-        }
-    }
     if (Status s = prepareOutput(options.out); !s)
         return s;
 
-    const BlobDetectorConfig blobConfig;
-    const CameraIntrinsics& in0 = rig->camera(0).intrinsics();
-    const CameraIntrinsics& in1 = rig->camera(1).intrinsics();
-    BlobDetector detector0(blobConfig, in0.width_px, in0.height_px);
-    BlobDetector detector1(blobConfig, in1.width_px, in1.height_px);
-    const StereoConfig stereoConfig;
-    StereoMatcher stereo(*rig, stereoConfig, blobConfig.maxBlobs);
-    BoundedVector<Blob> blobs[2] = {BoundedVector<Blob>(blobConfig.maxBlobs),
-                                    BoundedVector<Blob>(blobConfig.maxBlobs)};
-    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
-
     std::vector<recording::BlobRow> blobRows;
     std::vector<recording::PointRow> pointRows;
-    for (const recording::FrameRow& frame : *frames) {
-        if (*level == Level::Images) {
-            for (int c = 0; c < 2; ++c) {
-                const CameraIntrinsics& in = rig->camera(c).intrinsics();
-                Result<recording::Image8> image = recording::readPgm(
-                    recording::imagePath(options.input, frame.frame, c), in.width_px, in.height_px);
-                if (!image)
-                    return image.error();
-                (c == 0 ? detector0 : detector1)
-                    .detect(image->pixels.data(), image->width, blobs[c]);
-            }
-        } else {
-            blobs[0].clear();
-            blobs[1].clear();
-            for (const recording::BlobRow& row : inputBlobs[frame.frame]) {
-                Blob b;
-                b.centre_px = {row.u_px, row.v_px};
-                b.area_px = static_cast<float>(row.area_px.value_or(0.0));
-                blobs[row.camera].push_back(b);
-            }
-        }
-        for (int c = 0; c < 2; ++c)
-            for (const Blob& b : blobs[c])
-                blobRows.push_back({frame.frame, c, b.centre_px.x(), b.centre_px.y(),
-                                    static_cast<double>(b.area_px)});
-        stereo.match(blobs[0].span(), blobs[1].span(), markers);
-        for (const StereoMarker& m : markers)
-            pointRows.push_back({frame.frame, frame.time_s, m.position_rig_mm});
-    }
+    Result<FrameSourceSummary> read =
+        forEachMarkerFrame(options.input, *level, [&](const MarkerFrame& frame) -> Status {
+            for (int c = 0; c < 2; ++c)
+                for (const Blob& b : frame.blobs[c])
+                    blobRows.push_back({frame.frame, c, b.centre_px.x(), b.centre_px.y(),
+                                        static_cast<double>(b.area_px)});
+            for (const Vec3& p : frame.points_rig_mm)
+                pointRows.push_back({frame.frame, frame.time_s, p});
+            return Ok{};
+        });
+    if (!read)
+        return read.error();
 
     if (Status s = recording::writeRig(options.out / "rig.toml", *rig); !s)
         return s;
@@ -134,15 +90,10 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     if (Status s = copyTruth(options.input, options.out); !s)
         return s;
 
-    // The blob vectors count every refused blob, from the detector and from blobs.csv alike (the
-    // detector's own counter sees the same refusals, so adding it would count them twice).
-    const std::uint64_t blobOverflow = blobs[0].overflowCount() + blobs[1].overflowCount();
-    summary << "edgetrack reconstruct: " << frames->size() << " frames from "
-            << recording::levelName(*level) << ", " << blobRows.size() << " blobs, "
-            << pointRows.size() << " markers; rejected blobs "
-            << detector0.counters().rejectedNotRound + detector1.counters().rejectedNotRound
-            << " not round; blob overflow " << blobOverflow << ", marker overflow "
-            << stereo.counters().markerOverflow << "\n";
+    summary << "edgetrack reconstruct: " << read->frames << " frames from " << read->level << ", "
+            << blobRows.size() << " blobs, " << pointRows.size() << " markers; rejected blobs "
+            << read->rejectedNotRound << " not round; blob overflow " << read->blobOverflow
+            << ", marker overflow " << read->markerOverflow << "\n";
     return Ok{};
 }
 

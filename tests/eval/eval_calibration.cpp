@@ -20,10 +20,10 @@
 
 #include "core/blob_detector.hpp"
 #include "core/object_calibrator.hpp"
-#include "core/rigid_fit.hpp"
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
+#include "tests/support/model_alignment.hpp"
 
 using namespace edgetrack;
 
@@ -31,91 +31,6 @@ namespace {
 
 // Tolerances of the comparison with truth (mm).
 constexpr double kMatch_mm = 1.5;
-
-struct Alignment {
-    int object = -1;
-    RigidTransform truthFromModel{};
-    // model marker -> truth marker (or -1)
-    std::vector<int> truthOf;
-    std::size_t matched = 0;
-    double rms_mm = 0.0;
-};
-
-// Best alignment of a model with a true layout: from congruent triangles, refined by a fit of
-// every matched pair.
-Alignment align(const MarkerModel& model, const std::vector<Vec3>& truth, int object) {
-    Alignment best;
-    best.object = object;
-    const auto& pm = model.markers_model_mm;
-    const std::size_t n = pm.size();
-    auto evaluate = [&](const RigidTransform& t, Alignment& out) {
-        out.truthOf.assign(n, -1);
-        out.matched = 0;
-        for (std::size_t i = 0; i < n; ++i) {
-            double bestD = kMatch_mm;
-            for (std::size_t j = 0; j < truth.size(); ++j) {
-                const double d = (t.apply(pm[i]) - truth[j]).norm();
-                if (d < bestD) {
-                    bestD = d;
-                    out.truthOf[i] = static_cast<int>(j);
-                }
-            }
-            out.matched += out.truthOf[i] >= 0 ? 1u : 0u;
-        }
-    };
-    for (const ModelEdge& e : model.edges) {
-        const double dab = (pm[e.from] - pm[e.to]).norm();
-        for (std::size_t k = 0; k < n; ++k) {
-            if (k == e.from || k == e.to)
-                continue;
-            const double dak = (pm[e.from] - pm[k]).norm();
-            const double dbk = (pm[e.to] - pm[k]).norm();
-            if (std::min(dak, dbk) < 10.0)
-                continue;
-            for (std::size_t a = 0; a < truth.size(); ++a)
-                for (std::size_t b = 0; b < truth.size(); ++b) {
-                    if (a == b || std::abs((truth[a] - truth[b]).norm() - dab) > kMatch_mm)
-                        continue;
-                    for (std::size_t c = 0; c < truth.size(); ++c) {
-                        if (c == a || c == b ||
-                            std::abs((truth[a] - truth[c]).norm() - dak) > kMatch_mm ||
-                            std::abs((truth[b] - truth[c]).norm() - dbk) > kMatch_mm)
-                            continue;
-                        const Vec3 from[3] = {pm[e.from], pm[e.to], pm[k]};
-                        const Vec3 to[3] = {truth[a], truth[b], truth[c]};
-                        const std::optional<RigidFit> fit = fitRigid(from, to);
-                        if (!fit)
-                            continue;
-                        Alignment candidate;
-                        candidate.object = object;
-                        evaluate(fit->transform, candidate);
-                        if (candidate.matched > best.matched) {
-                            candidate.truthFromModel = fit->transform;
-                            best = candidate;
-                        }
-                    }
-                }
-        }
-        if (best.matched == n)
-            break;
-    }
-    if (best.matched >= 3) {
-        for (int round = 0; round < 2; ++round) {
-            std::vector<Vec3> from, to;
-            for (std::size_t i = 0; i < n; ++i)
-                if (best.truthOf[i] >= 0) {
-                    from.push_back(pm[i]);
-                    to.push_back(truth[static_cast<std::size_t>(best.truthOf[i])]);
-                }
-            if (const std::optional<RigidFit> fit = fitRigid(from, to)) {
-                best.truthFromModel = fit->transform;
-                best.rms_mm = fit->rms_mm;
-                evaluate(fit->transform, best);
-            }
-        }
-    }
-    return best;
-}
 
 struct ObjectReport {
     std::size_t expected = 0; // markers in view long enough
@@ -146,27 +61,30 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
     std::vector<double> squared(layouts.size(), 0.0);
     std::vector<std::size_t> squaredCount(layouts.size(), 0);
     for (const MarkerModel& model : models) {
-        Alignment best;
+        test::ModelAlignment best;
+        std::size_t bestObject = 0;
         for (std::size_t k = 0; k < layouts.size(); ++k) {
-            Alignment a = align(model, layouts[k], static_cast<int>(k));
-            if (a.matched > best.matched)
+            test::ModelAlignment a = test::alignModel(model, layouts[k], kMatch_mm);
+            if (a.matched > best.matched) {
                 best = a;
+                bestObject = k;
+            }
         }
         if (best.matched < 4) {
             ++r.strayModels;
             r.falseMarkers += model.markers_model_mm.size();
             continue;
         }
-        const auto k = static_cast<std::size_t>(best.object);
+        const std::size_t k = bestObject;
         ++r.objects[k].models;
-        for (std::size_t i = 0; i < best.truthOf.size(); ++i) {
-            if (best.truthOf[i] < 0) {
+        for (std::size_t i = 0; i < best.layoutMarkerOf.size(); ++i) {
+            if (best.layoutMarkerOf[i] < 0) {
                 ++r.falseMarkers;
                 continue;
             }
-            ++hits[k][static_cast<std::size_t>(best.truthOf[i])];
-            const double d = (best.truthFromModel.apply(model.markers_model_mm[i]) -
-                              layouts[k][static_cast<std::size_t>(best.truthOf[i])])
+            ++hits[k][static_cast<std::size_t>(best.layoutMarkerOf[i])];
+            const double d = (best.layoutFromModel.apply(model.markers_model_mm[i]) -
+                              layouts[k][static_cast<std::size_t>(best.layoutMarkerOf[i])])
                                  .squaredNorm();
             squared[k] += d;
             ++squaredCount[k];

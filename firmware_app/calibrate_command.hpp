@@ -1,0 +1,32 @@
+// `edgetrack calibrate`: learns the rigid objects of a recording and writes their model files.
+#pragma once
+
+#include <filesystem>
+#include <optional>
+#include <ostream>
+
+#include "core/object_calibrator.hpp"
+#include "core/result.hpp"
+#include "firmware_app/recording/recording.hpp"
+
+namespace edgetrack::app {
+
+struct CalibrateOptions {
+    std::filesystem::path input;
+    std::filesystem::path out;
+    std::optional<recording::Level> from;
+    CalibrationConfig config{};
+    /// Rewrite one progress line on \a progress (a terminal) while frames are read.
+    bool showProgress = false;
+};
+
+/**
+ * \brief Run object calibration over every frame of a recording (or .c3d file) and write
+ * MODELDIR/body_<id>.json for each object found.
+ *
+ * MODELDIR must be new or empty. Prints a summary (models, markers, S_min, counters) to
+ * \a summary, and progress (frames, objects, markers per object) to \a progress when asked.
+ */
+Status runCalibrate(const CalibrateOptions& options, std::ostream& summary, std::ostream& progress);
+
+} // namespace edgetrack::app
