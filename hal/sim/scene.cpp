@@ -260,7 +260,7 @@ StereoRig makeRig(const RigSpec& spec) {
 
 namespace {
 
-constexpr std::array<SceneInfo, 10> kScenes{{
+constexpr std::array<SceneInfo, 11> kScenes{{
     {"two_cubes", "7 cm and 5 cm cubes, slow and erratic, occluding each other (paper Table 1)"},
     {"cube_sphere", "7 cm cube and 7 cm sphere turned slowly side by side (paper Figure 7)"},
     {"toy_car", "toy car with 38 markers turned slowly to show every side"},
@@ -271,6 +271,7 @@ constexpr std::array<SceneInfo, 10> kScenes{{
     {"hand_occlusion", "7 cm cube turned slowly while a hand passes in front of it"},
     {"slow_cube", "7 cm cube alone, turned slowly: a calibration session"},
     {"wand", "three-marker wand waved through the volume"},
+    {"three_cubes", "three 7 cm cubes turned side by side: calibration cost (paper section 7.1)"},
 }};
 
 MotionSpec slowTurns(const Vec3& centre) {
@@ -370,6 +371,12 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
         scene.occluders.push_back({Motion(hand, ++stream), 40.0});
     } else if (name == "slow_cube") {
         add(makeCube70(), slowTurns({midline, 0.0, 560.0}));
+    } else if (name == "three_cubes") {
+        for (int i = 0; i < 3; ++i) {
+            MotionSpec m = slowTurns({midline - 120.0 + 120.0 * i, 0.0, 600.0});
+            m.wanderAmplitude_mm = {30.0, 25.0, 30.0};
+            add(makeCube70(), m);
+        }
     } else if (name == "wand") {
         MotionSpec m = erratic({midline, 0.0, 600.0});
         m.wanderAmplitude_mm = {120.0, 80.0, 80.0};
