@@ -27,6 +27,7 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , stamp_(config.maxMarkers)
     , candidates_(config.maxMarkers)
     , memberPairs_(stride_ * stride_)
+    , seen_(stride_)
     , edgeAlpha_(2.0 / (config.edgeWindow_frames + 1.0)) {
     objects_.resize(config.maxObjects);
     for (Object& o : objects_) {
@@ -68,6 +69,8 @@ void ObjectCalibrator::update(double time_s, std::span<const Vec3> points_rig_mm
             clusterObject(i);
     if (structureChanged_) // step 7
         collapseObjects();
+    if (counters_.frames % kMergeInterval_frames == 0)
+        mergeDuplicates();
     recogniseReappearing(tracked); // step 5
     insertNewMarkers(tracked);     // step 6
     rebuildTrackerIndex();
@@ -145,7 +148,10 @@ void ObjectCalibrator::updateObject(Object& o) {
     ++o.age;
     for (Member& member : o.members)
         member.visible = markers_[member.marker].visible;
+    const bool wasPosed = o.posed;
     fitPose(o);
+    if (wasPosed && !o.posed)
+        o.lostAtFrame = counters_.frames;
 
     // Where each member is now: seen, or predicted by the pose when it was reliable the last
     // time it was seen. A visible marker that moves against an occluded one's prediction breaks
@@ -204,7 +210,7 @@ void ObjectCalibrator::updateObject(Object& o) {
     }
 }
 
-void ObjectCalibrator::fitPose(Object& o, bool remeasure) {
+void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
     o.posed = false;
     fitFrom_.clear();
     fitTo_.clear();
@@ -238,7 +244,10 @@ void ObjectCalibrator::fitPose(Object& o, bool remeasure) {
         if (!member.visible)
             continue;
         const Vec3& p = markers_[member.marker].position_rig_mm;
-        if (!member.verified || remeasure) {
+        const bool established = member.framesReliable >= config_.minModelFrames;
+        const bool again =
+            remeasure == Remeasure::All || (remeasure == Remeasure::NewMembers && !established);
+        if (!member.verified || again) {
             // Measured under another frame (a re-based object, or a part that split off): it is
             // measured again in this one, and has to earn its place in the model again.
             if (!member.verified ||
@@ -256,7 +265,7 @@ void ObjectCalibrator::fitPose(Object& o, bool remeasure) {
     }
     o.posed = true;
     o.rigFromObject = *pose;
-    if (remeasure)
+    if (remeasure == Remeasure::All)
         for (Member& member : o.members)
             if (!member.visible)
                 member.framesReliable = 0; // it may belong to the other part; seen again, it shows
@@ -406,9 +415,25 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
     if (clusters.size() > 1)
         ++counters_.splits;
 
-    // Clusters after the first become new objects with their part of the graph.
+    // The cluster with the most established markers stays this object; the others become new
+    // objects with their part of the graph.
+    std::size_t kept = 0, keptEstablished = 0, keptSize = 0;
+    for (std::size_t c = 0; c < clusters.size(); ++c) {
+        std::size_t established = 0;
+        clusters[c].forEach([&](std::size_t i) {
+            established += o.members[i].framesReliable >= config_.minModelFrames ? 1u : 0u;
+        });
+        if (c == 0 || established > keptEstablished ||
+            (established == keptEstablished && clusters[c].size() > keptSize)) {
+            kept = c;
+            keptEstablished = established;
+            keptSize = clusters[c].size();
+        }
+    }
     FixedVector<std::size_t, MarkerSet::kCapacity> newIndex;
-    for (std::size_t c = 1; c < clusters.size(); ++c) {
+    for (std::size_t c = 0; c < clusters.size(); ++c) {
+        if (c == kept)
+            continue;
         Object* part = newObject();
         if (part == nullptr) {
             ++counters_.objectOverflow;
@@ -430,17 +455,17 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
                 if (newIndex[i] != kNone && newIndex[j] != kNone)
                     edge(*part, newIndex[i], newIndex[j]) = edge(whole, i, j);
         part->rigFromObject = whole.rigFromObject;
-        fitPose(*part, true);
+        fitPose(*part, Remeasure::All);
     }
-    // The first cluster stays in this object; members of no cluster leave it.
-    const MarkerSet keep = (clusters.empty() ? MarkerSet{} : clusters[0]) | pending;
+    // Members of no cluster leave this object.
+    const MarkerSet keep = (clusters.empty() ? MarkerSet{} : clusters[kept]) | pending;
     for (std::size_t i = n; i-- > 0;)
         if (!keep.contains(i))
             removeMember(o, i);
     if (o.members.empty())
         deactivate(o);
     else
-        fitPose(o, clusters.size() > 1);
+        fitPose(o, clusters.size() > 1 ? Remeasure::NewMembers : Remeasure::None);
 }
 
 bool ObjectCalibrator::hasActiveEdge(const Object& o, std::size_t member) const {
@@ -559,7 +584,8 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
     o->rigFromObject = RigidTransform::identity();
 }
 
-void ObjectCalibrator::refind(Object& o) {
+std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
+                                                           std::span<const std::size_t> seen) {
     // Member pairs sorted by distance, so a candidate pair's distance finds its model pairs fast.
     memberPairs_.clear();
     const std::size_t n = o.members.size();
@@ -571,16 +597,16 @@ void ObjectCalibrator::refind(Object& o) {
                 memberPairs_.push_back(
                     {(o.members[i].model_mm - o.members[j].model_mm).norm(), i, j});
     }
-    if (memberPairs_.size() < 6)
-        return;
+    if (memberPairs_.size() < 6 || seen.size() < kRefindMinMarkers)
+        return std::nullopt;
     std::sort(
         memberPairs_.begin(), memberPairs_.end(),
         [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
     const double tol = config_.smin.tolerance_mm;
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
-    const std::size_t c = candidates_.size();
+    const std::size_t c = seen.size();
     auto position = [&](std::size_t candidate) -> const Vec3& {
-        return markers_[candidates_[candidate]].position_rig_mm;
+        return markers_[seen[candidate]].position_rig_mm;
     };
     std::size_t budget = kRefindBudget;
     std::optional<RigidTransform> best;
@@ -630,8 +656,22 @@ void ObjectCalibrator::refind(Object& o) {
         }
     if (budget == 0)
         ++counters_.refindBudgetExhausted;
+    // A few markers can fit a wrong place of a large model by chance; most of what is seen must
+    // sit on the model.
+    if (best && static_cast<double>(bestCount) < kRefindShare * static_cast<double>(c))
+        return std::nullopt;
+    return best;
+}
+
+void ObjectCalibrator::refind(Object& o) {
+    const std::optional<RigidTransform> best = searchLost(o, candidates_.span());
     if (!best)
         return;
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    auto position = [&](std::size_t candidate) -> const Vec3& {
+        return markers_[candidates_[candidate]].position_rig_mm;
+    };
+    const std::size_t c = candidates_.size();
     // The candidates near a member's place are that member, seen again.
     for (std::size_t k = c; k-- > 0;) {
         const Vec3 p = position(k);
@@ -686,6 +726,118 @@ void ObjectCalibrator::collapseObjects() {
     }
 }
 
+// --- Step 7, continued: two objects that are one body become one. -----------------------------
+
+void ObjectCalibrator::mergeDuplicates() {
+    // A body can end up as two objects: it was lost and its markers came back as new ones, which
+    // joined other objects and broke away from them as a fragment. A fragment is merged into the
+    // object it duplicates when its markers sit on that object's markers: in place, when both have
+    // a pose now; by its shape, when the other was lost before the fragment was born.
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    for (Object& fragment : objects_) {
+        if (!fragment.active || !fragment.posed)
+            continue;
+        seen_.clear();
+        for (const Member& m : fragment.members)
+            if (m.visible && m.verified)
+                seen_.push_back(m.marker);
+        if (seen_.size() < kRefindMinMarkers)
+            continue;
+        for (Object& body : objects_) {
+            if (&body == &fragment || !body.active ||
+                body.members.size() < fragment.members.size() ||
+                (body.members.size() == fragment.members.size() && body.id > fragment.id))
+                continue;
+            std::optional<RigidTransform> rigFromBody;
+            if (body.posed) {
+                // Only markers established in both count: a new marker joins every object for
+                // a while, so sitting on both proves nothing until it has stayed with both.
+                std::size_t onBody = 0;
+                for (const Member& a : fragment.members) {
+                    if (!a.visible || !a.verified || a.framesReliable < config_.minModelFrames)
+                        continue;
+                    const Vec3& p = markers_[a.marker].position_rig_mm;
+                    for (const Member& m : body.members)
+                        if (m.verified && m.framesReliable >= config_.minModelFrames &&
+                            (body.rigFromObject.apply(m.model_mm) - p).squaredNorm() <= radius2) {
+                            ++onBody;
+                            break;
+                        }
+                }
+                if (onBody >= kRefindMinMarkers)
+                    rigFromBody = body.rigFromObject;
+            } else if (body.lostAtFrame < fragment.bornFrame) {
+                rigFromBody = searchLost(body, seen_.span());
+            }
+            if (!rigFromBody)
+                continue;
+            body.posed = true;
+            body.rigFromObject = *rigFromBody;
+            merge(fragment, body, rigFromBody->inverse() * fragment.rigFromObject);
+            ++counters_.merged;
+            structureChanged_ = true;
+            break;
+        }
+    }
+}
+
+void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& intoFromFrom) {
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    FixedVector<std::size_t, MarkerSet::kCapacity> indexInto;
+    for (const Member& a : from.members) {
+        const Vec3 position = intoFromFrom.apply(a.model_mm);
+        std::size_t match = kNone;
+        double nearest2 = radius2;
+        for (std::size_t j = 0; j < into.members.size(); ++j) {
+            const double d2 = (into.members[j].model_mm - position).squaredNorm();
+            if (into.members[j].verified && d2 <= nearest2) {
+                nearest2 = d2;
+                match = j;
+            }
+        }
+        if (match != kNone) {
+            Member& b = into.members[match];
+            KnownMarker& seenNow = markers_[a.marker];
+            KnownMarker& known = markers_[b.marker];
+            if (b.marker != a.marker && seenNow.visible && !known.visible) {
+                // One physical marker, two identities: the older one is seen again.
+                known.visible = true;
+                known.trackerId = seenNow.trackerId;
+                known.position_rig_mm = seenNow.position_rig_mm;
+                known.framesSeen += seenNow.framesSeen;
+                seenNow.visible = false;
+                seenNow.trackerId = 0;
+                b.visible = true;
+            }
+            b.framesReliable = std::max(b.framesReliable, a.framesReliable);
+            indexInto.push_back(match);
+        } else if (addMember(into, a.marker, position)) {
+            Member& copy = into.members.back();
+            copy.samples = a.samples;
+            copy.framesReliable = a.framesReliable;
+            copy.visible = a.visible;
+            copy.inlier = a.inlier;
+            copy.wasInlier = a.wasInlier;
+            indexInto.push_back(into.members.size() - 1);
+        } else {
+            indexInto.push_back(kNone);
+        }
+    }
+    for (std::size_t i = 0; i < from.members.size(); ++i)
+        for (std::size_t j = i + 1; j < from.members.size(); ++j) {
+            const std::size_t a = indexInto[i], b = indexInto[j];
+            if (a == kNone || b == kNone || a == b)
+                continue;
+            Edge& e = edge(into, std::min(a, b), std::max(a, b));
+            const Edge& carried = edge(from, i, j);
+            if (e.state == EdgeState::None)
+                e = carried;
+            e.coVisible = e.coVisible || carried.coVisible;
+        }
+    deactivate(from);
+    into.dirty = true;
+}
+
 // --- Storage. -----------------------------------------------------------------------------------
 
 ObjectCalibrator::Object* ObjectCalibrator::newObject() {
@@ -698,6 +850,8 @@ ObjectCalibrator::Object* ObjectCalibrator::newObject() {
         o.dirty = false;
         o.posed = false;
         o.age = 0;
+        o.bornFrame = counters_.frames;
+        o.lostAtFrame = counters_.frames;
         return &o;
     }
     return nullptr;
@@ -809,16 +963,33 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
     std::size_t count = 0;
     FixedVector<std::size_t, MarkerSet::kCapacity> chosen;
     FixedVector<Vec3, MarkerSet::kCapacity> layout;
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     for (const Object& o : objects_) {
         if (!o.active || count == out.size())
             continue;
         chosen.clear();
         layout.clear();
         for (std::size_t i = 0; i < o.members.size(); ++i)
-            if (o.members[i].framesReliable >= config_.minModelFrames) {
+            if (o.members[i].framesReliable >= config_.minModelFrames)
                 chosen.push_back(i);
-                layout.push_back(o.members[i].model_mm);
-            }
+        // One physical marker can have two identities in an object (lost, then born again
+        // before its prediction caught it): the better-measured one goes into the model.
+        std::sort(chosen.begin(), chosen.end(), [&](std::size_t a, std::size_t b) {
+            return o.members[a].framesReliable > o.members[b].framesReliable;
+        });
+        std::size_t distinct = 0;
+        for (std::size_t c = 0; c < chosen.size(); ++c) {
+            const Vec3& p = o.members[chosen[c]].model_mm;
+            const bool duplicate = std::any_of(layout.begin(), layout.end(), [&](const Vec3& q) {
+                return (p - q).squaredNorm() <= radius2;
+            });
+            if (duplicate)
+                continue;
+            chosen[distinct++] = chosen[c];
+            layout.push_back(p);
+        }
+        while (chosen.size() > distinct)
+            chosen.pop_back();
         if (chosen.size() < config_.minModelMarkers)
             continue;
         MarkerModel& model = out[count];

@@ -61,6 +61,8 @@ struct CalibrationCounters {
     /// Lost objects found again among new markers, and searches cut short by their budget.
     std::uint64_t refound = 0;
     std::uint64_t refindBudgetExhausted = 0;
+    /// Objects merged into another object that was the same body.
+    std::uint64_t merged = 0;
     /// Objects whose frame was started afresh because no pose agreed with three markers.
     std::uint64_t rebased = 0;
     /// Refused for lack of room: markers, objects, markers in an object.
@@ -203,6 +205,9 @@ private:
         bool posed = false;
         RigidTransform rigFromObject{};
         std::uint32_t age = 0;
+        /// Frame (counters.frames) of its creation, and of the last loss of its pose.
+        std::uint64_t bornFrame = 0;
+        std::uint64_t lostAtFrame = 0;
     };
 
     Edge& edge(Object& o, std::size_t i, std::size_t j) { return o.edges[i * stride_ + j]; }
@@ -213,7 +218,10 @@ private:
     void bindTrackedMarkers(std::span<const TrackedMarker> tracked);
     void removeInvalidMarkers();
     void updateObject(Object& o);
-    void fitPose(Object& o, bool remeasure = false);
+    /// After a split, which members are measured again in the part's frame: none, those not yet
+    /// established (the part that keeps the object), or all of them (a part that splits off).
+    enum class Remeasure { None, NewMembers, All };
+    void fitPose(Object& o, Remeasure remeasure = Remeasure::None);
     std::optional<RigidTransform> consensusPose();
     void rebase(Object& o);
     void clusterObject(std::size_t objectIndex);
@@ -222,6 +230,9 @@ private:
     void insertNewMarkers(std::span<const TrackedMarker> tracked);
     void collapseObjects();
     void refind(Object& o);
+    std::optional<RigidTransform> searchLost(const Object& o, std::span<const std::size_t> seen);
+    void mergeDuplicates();
+    void merge(Object& from, Object& into, const RigidTransform& intoFromFrom);
 
     Object* newObject();
     void deactivate(Object& o);
@@ -258,6 +269,7 @@ private:
         std::size_t j = 0;
     };
     BoundedVector<MemberPair> memberPairs_;
+    BoundedVector<std::size_t> seen_;
     std::uint32_t stampValue_ = 0;
     double edgeAlpha_ = 0.2;
     std::uint32_t nextMarkerId_ = 1;
@@ -270,9 +282,12 @@ private:
     /// may have been dropped while the objects around it were still splitting.
     static constexpr std::uint64_t kRetryRejected_frames = 100;
     /// A lost object is found again from at least this many of its markers.
-    static constexpr std::size_t kRefindMinMarkers = 4;
+    static constexpr std::size_t kRefindMinMarkers = 5;
+    static constexpr double kRefindShare = 0.6;
     /// Inner steps of one search for a lost object, so that a flood of new points cannot stall.
     static constexpr std::size_t kRefindBudget = 200000;
+    /// Objects are compared for duplicates every this many frames.
+    static constexpr std::uint64_t kMergeInterval_frames = 10;
     static constexpr std::size_t kNone = static_cast<std::size_t>(-1);
 };
 

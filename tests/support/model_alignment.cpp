@@ -37,40 +37,53 @@ ModelAlignment alignModel(const MarkerModel& model, const std::vector<Vec3>& lay
     best.layoutMarkerOf.assign(model.markers_model_mm.size(), -1);
     const auto& pm = model.markers_model_mm;
     const std::size_t n = pm.size();
-    for (const ModelEdge& e : model.edges) {
-        const double dab = (pm[e.from] - pm[e.to]).norm();
-        for (std::size_t k = 0; k < n; ++k) {
-            if (k == e.from || k == e.to)
+    // One well-shaped triangle per model marker: the marker, its farthest co-visible neighbour,
+    // and the neighbour of both farthest from their line. Trying n triangles, not every one,
+    // keeps this fast enough to run under qemu.
+    for (std::size_t i = 0; i < n && best.matched < n; ++i) {
+        std::size_t j = n, k = n;
+        double far = 0.0, height = 10.0;
+        for (std::size_t x = 0; x < n; ++x)
+            if (x != i && model.hasEdge(i, x) && (pm[x] - pm[i]).norm() > far) {
+                far = (pm[x] - pm[i]).norm();
+                j = x;
+            }
+        if (j == n)
+            continue;
+        for (std::size_t x = 0; x < n; ++x) {
+            if (x == i || x == j || !model.hasEdge(i, x) || !model.hasEdge(j, x))
                 continue;
-            const double dak = (pm[e.from] - pm[k]).norm();
-            const double dbk = (pm[e.to] - pm[k]).norm();
-            // A flat triangle fixes the rotation about its long side poorly.
-            if ((pm[e.to] - pm[e.from]).cross(pm[k] - pm[e.from]).norm() / std::max(dab, 1e-9) <
-                10.0)
-                continue;
-            for (std::size_t a = 0; a < layout.size(); ++a)
-                for (std::size_t b = 0; b < layout.size(); ++b) {
-                    if (a == b || std::abs((layout[a] - layout[b]).norm() - dab) > tolerance_mm)
-                        continue;
-                    for (std::size_t c = 0; c < layout.size(); ++c) {
-                        if (c == a || c == b ||
-                            std::abs((layout[a] - layout[c]).norm() - dak) > tolerance_mm ||
-                            std::abs((layout[b] - layout[c]).norm() - dbk) > tolerance_mm)
-                            continue;
-                        const Vec3 from[3] = {pm[e.from], pm[e.to], pm[k]};
-                        const Vec3 to[3] = {layout[a], layout[b], layout[c]};
-                        const std::optional<RigidFit> fit = fitRigid(from, to);
-                        if (!fit)
-                            continue;
-                        ModelAlignment candidate;
-                        assign(model, layout, tolerance_mm, fit->transform, candidate);
-                        if (candidate.matched > best.matched)
-                            best = candidate;
-                    }
-                }
+            const double h = (pm[j] - pm[i]).cross(pm[x] - pm[i]).norm() / far;
+            if (h > height) {
+                height = h;
+                k = x;
+            }
         }
-        if (best.matched == n)
-            break;
+        if (k == n)
+            continue;
+        const double dab = (pm[i] - pm[j]).norm();
+        const double dak = (pm[i] - pm[k]).norm();
+        const double dbk = (pm[j] - pm[k]).norm();
+        for (std::size_t a = 0; a < layout.size(); ++a)
+            for (std::size_t b = 0; b < layout.size(); ++b) {
+                if (a == b || std::abs((layout[a] - layout[b]).norm() - dab) > tolerance_mm)
+                    continue;
+                for (std::size_t c = 0; c < layout.size(); ++c) {
+                    if (c == a || c == b ||
+                        std::abs((layout[a] - layout[c]).norm() - dak) > tolerance_mm ||
+                        std::abs((layout[b] - layout[c]).norm() - dbk) > tolerance_mm)
+                        continue;
+                    const Vec3 from[3] = {pm[i], pm[j], pm[k]};
+                    const Vec3 to[3] = {layout[a], layout[b], layout[c]};
+                    const std::optional<RigidFit> fit = fitRigid(from, to);
+                    if (!fit)
+                        continue;
+                    ModelAlignment candidate;
+                    assign(model, layout, tolerance_mm, fit->transform, candidate);
+                    if (candidate.matched > best.matched)
+                        best = candidate;
+                }
+            }
     }
     // Refine on every matched pair, twice (the matches may change with the better transform).
     for (int round = 0; round < 2 && best.matched >= 3; ++round) {

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -57,6 +58,19 @@ bool sameShape(std::span<const Vec3> a, std::span<const Vec3> b, double toleranc
     return true;
 }
 
+// For failure messages: each model's size and how close it is to each true layout.
+std::string describe(std::span<const MarkerModel> models, const std::vector<Vec3> (&layouts)[2]) {
+    std::string text;
+    for (const MarkerModel& m : models) {
+        text += "\n  model of " + std::to_string(m.markers_model_mm.size()) + " markers";
+        for (int k = 0; k < 2; ++k)
+            text += sameShape(m.markers_model_mm.span(), layouts[k], 0.2)
+                        ? ", same shape as body " + std::to_string(k)
+                        : "";
+    }
+    return text;
+}
+
 class TwoBodies : public ::testing::Test {
 protected:
     // Markers of body k visible at time t: a body hides the markers on its far side, as an
@@ -96,7 +110,7 @@ TEST_F(TwoBodies, LearnsTwoRigidObjectsThatMoveApart) {
     for (int i = 0; i < 4; ++i)
         models.emplace_back(config.maxMarkersPerObject);
     const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u);
+    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
     int matched[2] = {0, 0};
     for (std::size_t i = 0; i < count; ++i)
         for (int k = 0; k < 2; ++k)
@@ -125,7 +139,7 @@ TEST_F(TwoBodies, OccludedMarkersAreRecognisedWhenTheyReappear) {
     for (int i = 0; i < 4; ++i)
         models.emplace_back(config.maxMarkersPerObject);
     const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u);
+    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
     int matched[2] = {0, 0};
     for (std::size_t i = 0; i < count; ++i)
         for (int k = 0; k < 2; ++k)
@@ -156,7 +170,7 @@ TEST_F(TwoBodies, ShortLivedReflectionsDoNotBecomeMarkers) {
     for (int i = 0; i < 4; ++i)
         models.emplace_back(config.maxMarkersPerObject);
     const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u);
+    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
     std::size_t total = 0;
     for (std::size_t i = 0; i < count; ++i)
         total += models[i].markers_model_mm.size();
