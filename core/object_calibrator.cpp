@@ -198,6 +198,7 @@ void ObjectCalibrator::updateObject(Object& o) {
 
     if (!o.posed)
         return;
+    removeGhosts(o);
     const RigidTransform objectFromRig = o.rigFromObject.inverse();
     for (Member& member : o.members) {
         if (!member.visible || !member.inlier)
@@ -468,6 +469,34 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
         fitPose(o, clusters.size() > 1 ? Remeasure::NewMembers : Remeasure::None);
 }
 
+void ObjectCalibrator::removeGhosts(Object& o) {
+    // A marker is expected when markers it was seen with are seen where the pose puts them. A
+    // member that is almost never there when expected has a position from a wrong frame (measured
+    // while its object was still mixed with another), so the marker it stood for came back as a
+    // new member long ago: the stale one goes.
+    for (std::size_t i = o.members.size(); i-- > 0;) {
+        Member& m = o.members[i];
+        if (!m.verified || m.framesReliable < config_.minModelFrames)
+            continue;
+        std::size_t partnersSeen = 0;
+        for (std::size_t j = 0; j < o.members.size() && partnersSeen < 3; ++j)
+            if (j != i && o.members[j].visible && o.members[j].inlier &&
+                edge(o, std::min(i, j), std::max(i, j)).coVisible)
+                ++partnersSeen;
+        if (partnersSeen < 3)
+            continue;
+        ++m.expectedFrames;
+        if (!m.visible)
+            ++m.missedFrames;
+        if (m.expectedFrames >= kGhostEvidence_frames &&
+            static_cast<double>(m.missedFrames) > kGhostMissShare * m.expectedFrames) {
+            removeMember(o, i);
+            o.dirty = true;
+            ++counters_.ghostsRemoved;
+        }
+    }
+}
+
 bool ObjectCalibrator::hasActiveEdge(const Object& o, std::size_t member) const {
     for (std::size_t j = 0; j < o.members.size(); ++j)
         if (j != member &&
@@ -657,10 +686,23 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
     if (budget == 0)
         ++counters_.refindBudgetExhausted;
     // A few markers can fit a wrong place of a large model by chance; most of what is seen must
-    // sit on the model.
-    if (best && static_cast<double>(bestCount) < kRefindShare * static_cast<double>(c))
+    // sit on the model, and all of it tightly once fitted together.
+    if (!best || static_cast<double>(bestCount) < kRefindShare * static_cast<double>(c))
         return std::nullopt;
-    return best;
+    fitFrom_.clear();
+    fitTo_.clear();
+    for (std::size_t k = 0; k < c; ++k)
+        for (const Member& m : o.members)
+            if (m.verified && !m.visible &&
+                (best->apply(m.model_mm) - position(k)).squaredNorm() <= radius2) {
+                fitFrom_.push_back(m.model_mm);
+                fitTo_.push_back(position(k));
+                break;
+            }
+    const std::optional<RigidFit> refit = fitRigid(fitFrom_.span(), fitTo_.span());
+    if (!refit || refit->rms_mm > config_.poseInlier_mm)
+        return std::nullopt;
+    return refit->transform;
 }
 
 void ObjectCalibrator::refind(Object& o) {
@@ -741,7 +783,7 @@ void ObjectCalibrator::mergeDuplicates() {
         for (const Member& m : fragment.members)
             if (m.visible && m.verified)
                 seen_.push_back(m.marker);
-        if (seen_.size() < kRefindMinMarkers)
+        if (seen_.size() < kMergeInPlaceMin)
             continue;
         for (Object& body : objects_) {
             if (&body == &fragment || !body.active ||
@@ -764,7 +806,7 @@ void ObjectCalibrator::mergeDuplicates() {
                             break;
                         }
                 }
-                if (onBody >= kRefindMinMarkers)
+                if (onBody >= kMergeInPlaceMin)
                     rigFromBody = body.rigFromObject;
             } else if (body.lostAtFrame < fragment.bornFrame) {
                 rigFromBody = searchLost(body, seen_.span());
@@ -879,6 +921,8 @@ bool ObjectCalibrator::addMember(Object& o, std::size_t marker, const Vec3& mode
     member->inlier = false;
     member->wasInlier = false;
     member->recentResidual_mm = 0.0;
+    member->expectedFrames = 0;
+    member->missedFrames = 0;
     for (std::size_t j = 0; j < stride_; ++j) {
         edge(o, index, j) = Edge{};
         edge(o, j, index) = Edge{};

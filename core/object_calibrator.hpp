@@ -63,6 +63,8 @@ struct CalibrationCounters {
     std::uint64_t refindBudgetExhausted = 0;
     /// Objects merged into another object that was the same body.
     std::uint64_t merged = 0;
+    /// Members removed because they were almost never where they were expected.
+    std::uint64_t ghostsRemoved = 0;
     /// Objects whose frame was started afresh because no pose agreed with three markers.
     std::uint64_t rebased = 0;
     /// Refused for lack of room: markers, objects, markers in an object.
@@ -192,6 +194,9 @@ private:
         bool wasInlier = false;
         /// Running mean of the distance from its place under the object's pose (mm).
         double recentResidual_mm = 0.0;
+        /// Frames in which markers seen with it were seen, and of those, frames it was not.
+        std::uint32_t expectedFrames = 0;
+        std::uint32_t missedFrames = 0;
         /// model_mm belongs to the object's current frame (false after a re-base, until seen).
         bool verified = true;
     };
@@ -226,6 +231,7 @@ private:
     void rebase(Object& o);
     void clusterObject(std::size_t objectIndex);
     bool hasActiveEdge(const Object& o, std::size_t member) const;
+    void removeGhosts(Object& o);
     void recogniseReappearing(std::span<const TrackedMarker> tracked);
     void insertNewMarkers(std::span<const TrackedMarker> tracked);
     void collapseObjects();
@@ -282,8 +288,14 @@ private:
     /// may have been dropped while the objects around it were still splitting.
     static constexpr std::uint64_t kRetryRejected_frames = 100;
     /// A lost object is found again from at least this many of its markers.
-    static constexpr std::size_t kRefindMinMarkers = 5;
+    static constexpr std::size_t kRefindMinMarkers = 6;
     static constexpr double kRefindShare = 0.6;
+    /// Established markers of two posed objects that must coincide to make them one body.
+    static constexpr std::size_t kMergeInPlaceMin = 4;
+    /// A member missing from this share of at least this many frames in which it was expected
+    /// is stale (see removeGhosts).
+    static constexpr std::uint32_t kGhostEvidence_frames = 300;
+    static constexpr double kGhostMissShare = 0.95;
     /// Inner steps of one search for a lost object, so that a flood of new points cannot stall.
     static constexpr std::size_t kRefindBudget = 200000;
     /// Objects are compared for duplicates every this many frames.
