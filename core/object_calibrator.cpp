@@ -786,12 +786,14 @@ void ObjectCalibrator::mergeDuplicates() {
         if (seen_.size() < kMergeInPlaceMin)
             continue;
         for (Object& body : objects_) {
-            if (&body == &fragment || !body.active ||
-                body.members.size() < fragment.members.size() ||
-                (body.members.size() == fragment.members.size() && body.id > fragment.id))
+            if (&body == &fragment || !body.active)
                 continue;
-            std::optional<RigidTransform> rigFromBody;
+            const bool larger =
+                body.members.size() > fragment.members.size() ||
+                (body.members.size() == fragment.members.size() && body.id < fragment.id);
             if (body.posed) {
+                if (!larger)
+                    continue; // the pair is looked at from the other side
                 // Only markers established in both count: a new marker joins every object for
                 // a while, so sitting on both proves nothing until it has stayed with both.
                 std::size_t onBody = 0;
@@ -806,16 +808,25 @@ void ObjectCalibrator::mergeDuplicates() {
                             break;
                         }
                 }
-                if (onBody >= kMergeInPlaceMin)
-                    rigFromBody = body.rigFromObject;
-            } else if (body.lostAtFrame < fragment.bornFrame) {
-                rigFromBody = searchLost(body, seen_.span());
+                if (onBody < kMergeInPlaceMin)
+                    continue;
+                merge(fragment, body, body.rigFromObject.inverse() * fragment.rigFromObject);
+            } else {
+                if (body.lostAtFrame >= fragment.bornFrame)
+                    continue;
+                const std::optional<RigidTransform> rigFromBody = searchLost(body, seen_.span());
+                if (!rigFromBody)
+                    continue;
+                // The smaller goes into the larger: a body seen from a new side after it came
+                // back may have grown past what was learnt before it was lost.
+                if (larger) {
+                    body.posed = true;
+                    body.rigFromObject = *rigFromBody;
+                    merge(fragment, body, rigFromBody->inverse() * fragment.rigFromObject);
+                } else {
+                    merge(body, fragment, fragment.rigFromObject.inverse() * *rigFromBody);
+                }
             }
-            if (!rigFromBody)
-                continue;
-            body.posed = true;
-            body.rigFromObject = *rigFromBody;
-            merge(fragment, body, rigFromBody->inverse() * fragment.rigFromObject);
             ++counters_.merged;
             structureChanged_ = true;
             break;

@@ -193,6 +193,34 @@ TEST_F(TwoBodies, NoHeapAllocationPerFrameAfterWarmUp) {
     EXPECT_EQ(calibrator.counters().frames, 1200u);
 }
 
+TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
+    // The paper's future work: the user takes the object out of view (or pauses) for two
+    // seconds; when it is back, its markers must rejoin the model instead of starting a new one.
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<Vec3> points, first;
+    for (int f = 0; f < 3000; ++f) {
+        frame(f / 100.0, true, points);
+        // Only body 0: drop the markers of body 1 (its layout is the second one).
+        first.clear();
+        const RigidTransform pose =
+            poseAt(f / 100.0, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0);
+        for (const Vec3& p : points)
+            if ((p - pose.translation_mm).norm() < 80.0)
+                first.push_back(p);
+        const bool away = f >= 900 && f < 1100;
+        calibrator.update(f / 100.0, away ? std::span<const Vec3>() : std::span<const Vec3>(first));
+    }
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    const std::size_t count = calibrator.exportModels(models);
+    ASSERT_EQ(count, 1u) << describe(std::span(models).first(count), layouts);
+    EXPECT_TRUE(sameShape(models[0].markers_model_mm.span(), layouts[0], 0.2))
+        << describe(std::span(models).first(count), layouts);
+    EXPECT_GT(calibrator.counters().refound + calibrator.counters().merged, 0u);
+}
+
 TEST(ObjectCalibrator, RefusesMoreMarkersPerObjectThanItsSetsHold) {
     CalibrationConfig config;
     config.maxMarkersPerObject = MarkerSet::kCapacity + 1;
