@@ -13,16 +13,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Status prepareModelDirectory(const fs::path& out) {
-    std::error_code ec;
-    if (fs::exists(out, ec) && !fs::is_empty(out, ec))
-        return Error{out.string() + ": exists and is not empty; choose a new directory"};
-    fs::create_directories(out, ec);
-    if (ec)
-        return Error{out.string() + ": cannot create: " + ec.message()};
-    return Ok{};
-}
-
 void printProgress(std::ostream& progress, const MarkerFrame& frame,
                    const ObjectCalibrator& calibrator, std::vector<CalibrationObjectView>& views) {
     const std::size_t count = calibrator.objectViews(views);
@@ -43,7 +33,7 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     if (!calibrator.isValid())
         return Error{"calibration configuration: markers per object must be 4 to " +
                      std::to_string(MarkerSet::kCapacity)};
-    if (Status s = prepareModelDirectory(options.out); !s)
+    if (Status s = prepareOutputDirectory(options.out); !s)
         return s;
 
     std::vector<CalibrationObjectView> views(options.config.maxObjects);

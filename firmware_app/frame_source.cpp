@@ -21,6 +21,16 @@ bool isC3dFile(const fs::path& input) {
     return extension == ".c3d";
 }
 
+Status prepareOutputDirectory(const fs::path& out) {
+    std::error_code ec;
+    if (fs::exists(out, ec) && !fs::is_empty(out, ec))
+        return Error{out.string() + ": exists and is not empty; choose a new directory"};
+    fs::create_directories(out, ec);
+    if (ec)
+        return Error{out.string() + ": cannot create: " + ec.message()};
+    return Ok{};
+}
+
 namespace {
 
 Result<FrameSourceSummary> readC3dFrames(const fs::path& input,

@@ -51,4 +51,10 @@ forEachMarkerFrame(const std::filesystem::path& input, std::optional<recording::
 /// \return whether \a input names a C3D file (by its extension).
 bool isC3dFile(const std::filesystem::path& input);
 
+/**
+ * \brief Make \a out ready to be written: created if missing; refused when it already holds
+ * anything, so that no run mixes its files with an older one's.
+ */
+Status prepareOutputDirectory(const std::filesystem::path& out);
+
 } // namespace edgetrack::app

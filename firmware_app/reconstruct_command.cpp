@@ -14,16 +14,6 @@ using recording::Level;
 
 namespace {
 
-Status prepareOutput(const fs::path& out) {
-    std::error_code ec;
-    if (fs::exists(out, ec) && !fs::is_empty(out, ec))
-        return Error{out.string() + ": exists and is not empty; choose a new directory"};
-    fs::create_directories(out, ec);
-    if (ec)
-        return Error{out.string() + ": cannot create: " + ec.message()};
-    return Ok{};
-}
-
 Status copyTruth(const fs::path& input, const fs::path& out) {
     std::error_code ec;
     if (fs::is_regular_file(input / "truth.csv", ec)) {
@@ -61,7 +51,7 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
         recording::readFrames(options.input / "frames.csv");
     if (!frames)
         return frames.error();
-    if (Status s = prepareOutput(options.out); !s)
+    if (Status s = prepareOutputDirectory(options.out); !s)
         return s;
 
     std::vector<recording::BlobRow> blobRows;

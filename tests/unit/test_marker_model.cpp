@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "core/marker_model.hpp"
+#include "tests/support/layouts.hpp"
 
 namespace edgetrack {
 namespace {
@@ -22,18 +23,7 @@ MarkerModel fullyConnected(const std::vector<Vec3>& layout) {
 }
 
 std::vector<Vec3> irregularLayout(std::size_t count, unsigned seed) {
-    std::mt19937 random(seed);
-    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
-    std::vector<Vec3> layout;
-    while (layout.size() < count) {
-        const Vec3 p(coordinate(random), coordinate(random), coordinate(random));
-        bool apart = true;
-        for (const Vec3& q : layout)
-            apart = apart && (p - q).norm() > 12.0;
-        if (apart)
-            layout.push_back(p);
-    }
-    return layout;
+    return test::irregularLayout(count, seed, 12.0);
 }
 
 TEST(CanonicalFrame, IsTheSameWhereverTheLayoutWasMeasured) {

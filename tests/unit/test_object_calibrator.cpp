@@ -9,23 +9,13 @@
 
 #include "core/object_calibrator.hpp"
 #include "tests/support/alloc_guard.hpp"
+#include "tests/support/layouts.hpp"
 
 namespace edgetrack {
 namespace {
 
 std::vector<Vec3> irregularLayout(std::size_t count, unsigned seed) {
-    std::mt19937 random(seed);
-    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
-    std::vector<Vec3> layout;
-    while (layout.size() < count) {
-        const Vec3 p(coordinate(random), coordinate(random), coordinate(random));
-        bool apart = true;
-        for (const Vec3& q : layout)
-            apart = apart && (p - q).norm() > 15.0;
-        if (apart)
-            layout.push_back(p);
-    }
-    return layout;
+    return test::irregularLayout(count, seed, 15.0);
 }
 
 // Rig-from-object pose of a body turning about its own axis while drifting (mm, rad, s).
@@ -92,6 +82,25 @@ protected:
         std::shuffle(points.begin(), points.end(), random);
     }
 
+    // Exports the models and checks there is exactly one of each body's shape; returns them.
+    std::vector<MarkerModel> expectOneModelPerBody(const ObjectCalibrator& calibrator,
+                                                   const CalibrationConfig& config) {
+        std::vector<MarkerModel> models;
+        for (int i = 0; i < 4; ++i)
+            models.emplace_back(config.maxMarkersPerObject);
+        models.resize(calibrator.exportModels(models));
+        EXPECT_EQ(models.size(), 2u) << describe(models, layouts);
+        for (int k = 0; k < 2; ++k)
+            EXPECT_EQ(std::count_if(models.begin(), models.end(),
+                                    [&](const MarkerModel& m) {
+                                        return sameShape(m.markers_model_mm.span(), layouts[k],
+                                                         0.2);
+                                    }),
+                      1)
+                << "body " << k << describe(models, layouts);
+        return models;
+    }
+
     std::vector<Vec3> layouts[2] = {irregularLayout(12, 1), irregularLayout(10, 2)};
     std::mt19937 random{42};
     std::normal_distribution<double> noise{0.0, 0.05};
@@ -106,20 +115,9 @@ TEST_F(TwoBodies, LearnsTwoRigidObjectsThatMoveApart) {
         frame(f / 100.0, false, points);
         calibrator.update(f / 100.0, points);
     }
-    std::vector<MarkerModel> models;
-    for (int i = 0; i < 4; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
-    int matched[2] = {0, 0};
-    for (std::size_t i = 0; i < count; ++i)
-        for (int k = 0; k < 2; ++k)
-            if (sameShape(models[i].markers_model_mm.span(), layouts[k], 0.2))
-                ++matched[k];
-    EXPECT_EQ(matched[0], 1);
-    EXPECT_EQ(matched[1], 1);
+    const std::vector<MarkerModel> models = expectOneModelPerBody(calibrator, config);
     EXPECT_GT(calibrator.counters().splits, 0u);
-    for (std::size_t i = 0; i < count; ++i) {
+    for (std::size_t i = 0; i < models.size(); ++i) {
         // All markers seen together: every pair is an edge.
         const std::size_t n = models[i].markers_model_mm.size();
         EXPECT_EQ(models[i].edges.size(), n * (n - 1) / 2);
@@ -135,18 +133,7 @@ TEST_F(TwoBodies, OccludedMarkersAreRecognisedWhenTheyReappear) {
         frame(f / 100.0, true, points);
         calibrator.update(f / 100.0, points);
     }
-    std::vector<MarkerModel> models;
-    for (int i = 0; i < 4; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
-    int matched[2] = {0, 0};
-    for (std::size_t i = 0; i < count; ++i)
-        for (int k = 0; k < 2; ++k)
-            if (sameShape(models[i].markers_model_mm.span(), layouts[k], 0.2))
-                ++matched[k];
-    EXPECT_EQ(matched[0], 1);
-    EXPECT_EQ(matched[1], 1);
+    const std::vector<MarkerModel> models = expectOneModelPerBody(calibrator, config);
     EXPECT_GT(calibrator.counters().markersReappeared, 20u);
 }
 
