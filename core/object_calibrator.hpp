@@ -93,7 +93,9 @@ struct CalibrationObjectView {
  * object's pose is fitted to its reliable markers so that occluded markers are predicted and new
  * markers near a prediction are recognised as reappearing; other new markers join every posed
  * object (or, with no object in view, start a new one); objects that became a subset of another
- * are collapsed.
+ * are collapsed. Beyond the paper: a lost object is found again among new markers with its
+ * partial model, fragments of one body are merged back, and members that are never where they
+ * are expected are removed (docs/object-calibration.md explains each and why).
  *
  * All storage is sized by the constructor from the configuration; update() never allocates.
  * Whatever does not fit is refused and counted.
