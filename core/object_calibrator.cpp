@@ -22,8 +22,9 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , knownOfTracked_(config.tracking.maxMarkers)
     , fitFrom_(stride_)
     , fitTo_(stride_)
-    , fitMember_(stride_)
-    , residual_(stride_)
+    , votes_(stride_)
+    , positionNow_(stride_)
+    , whereabouts_(stride_)
     , stamp_(config.maxMarkers)
     , candidates_(config.maxMarkers)
     , memberPairs_(stride_ * stride_)
@@ -32,8 +33,8 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     objects_.resize(config.maxObjects);
     for (Object& o : objects_) {
         o.members = BoundedVector<Member>(stride_);
-        o.edges = BoundedVector<Edge>(stride_ * stride_);
-        o.edges.resize(stride_ * stride_);
+        o.edges = BoundedVector<Edge>(edgeCount(stride_));
+        o.edges.resize(edgeCount(stride_));
     }
     markers_.resize(config.maxMarkers);
     stamp_.resize(config.maxMarkers);
@@ -145,7 +146,6 @@ void ObjectCalibrator::removeInvalidMarkers() {
 // --- Step 2 and the pose of step 5. ------------------------------------------------------------
 
 void ObjectCalibrator::updateObject(Object& o) {
-    ++o.age;
     for (Member& member : o.members)
         member.visible = markers_[member.marker].visible;
     const bool wasPosed = o.posed;
@@ -158,29 +158,32 @@ void ObjectCalibrator::updateObject(Object& o) {
     // their edge too; without this, edges to occluded markers would never break and would hold
     // objects together that have long moved apart.
     const std::size_t n = o.members.size();
-    residual_.clear();
-    fitTo_.clear();
-    for (std::size_t i = 0; i < n; ++i) {
-        const Member& m = o.members[i];
-        const bool predictable =
-            o.posed && m.verified && m.wasInlier && m.framesReliable >= config_.minModelFrames;
-        fitTo_.push_back(m.visible ? markers_[m.marker].position_rig_mm
-                                   : o.rigFromObject.apply(m.model_mm));
-        residual_.push_back(m.visible ? 1.0 : (predictable ? 0.0 : -1.0));
+    positionNow_.clear();
+    whereabouts_.clear();
+    for (const Member& m : o.members) {
+        const bool predictable = o.posed && m.verified && m.wasInlier && established(m);
+        positionNow_.push_back(m.visible ? markers_[m.marker].position_rig_mm
+                                         : o.rigFromObject.apply(m.model_mm));
+        whereabouts_.push_back(m.visible     ? Whereabouts::Seen
+                               : predictable ? Whereabouts::Predicted
+                                             : Whereabouts::Unknown);
     }
     for (std::size_t i = 0; i < n; ++i) {
-        if (residual_[i] < 0.0)
+        if (whereabouts_[i] == Whereabouts::Unknown)
             continue;
         for (std::size_t j = i + 1; j < n; ++j) {
-            if (residual_[j] < 0.0 || residual_[i] + residual_[j] < 1.0)
-                continue; // unknown, or both predicted
+            // Unknown, or both predicted: nothing measured.
+            if (whereabouts_[j] == Whereabouts::Unknown ||
+                (whereabouts_[i] == Whereabouts::Predicted &&
+                 whereabouts_[j] == Whereabouts::Predicted))
+                continue;
             Edge& e = edge(o, i, j);
-            if (residual_[i] > 0.0 && residual_[j] > 0.0 && o.posed && o.members[i].inlier &&
-                o.members[j].inlier)
+            if (whereabouts_[i] == Whereabouts::Seen && whereabouts_[j] == Whereabouts::Seen &&
+                o.posed && o.members[i].inlier && o.members[j].inlier)
                 e.coVisible = true;
             if (e.state != EdgeState::Active)
                 continue;
-            const double d = (fitTo_[i] - fitTo_[j]).norm();
+            const double d = (positionNow_[i] - positionNow_[j]).norm();
             e.recent_mm += edgeAlpha_ * (d - e.recent_mm);
             if (std::abs(e.recent_mm - e.mean_mm) > config_.edgeBreak_mm) {
                 e.state = EdgeState::Broken;
@@ -215,8 +218,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
     o.posed = false;
     fitFrom_.clear();
     fitTo_.clear();
-    fitMember_.clear();
-    residual_.clear();
+    votes_.clear();
     std::size_t visible = 0;
     for (std::size_t i = 0; i < o.members.size(); ++i) {
         Member& member = o.members[i];
@@ -228,11 +230,9 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             continue;
         fitFrom_.push_back(member.model_mm);
         fitTo_.push_back(markers_[member.marker].position_rig_mm);
-        fitMember_.push_back(i);
         // Established markers outvote new ones: a group of markers that just joined the object
         // (new markers go to every object) must not take its pose over.
-        residual_.push_back(member.framesReliable >= config_.minModelFrames ? kEstablishedVote
-                                                                            : 1.0);
+        votes_.push_back(established(member) ? kEstablishedVote : 1.0);
     }
     std::optional<RigidTransform> pose = consensusPose();
     if (!pose) {
@@ -245,20 +245,17 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
         if (!member.visible)
             continue;
         const Vec3& p = markers_[member.marker].position_rig_mm;
-        const bool established = member.framesReliable >= config_.minModelFrames;
-        const bool again =
-            remeasure == Remeasure::All || (remeasure == Remeasure::NewMembers && !established);
-        if (!member.verified || again) {
+        const bool again = remeasure == Remeasure::All ||
+                           (remeasure == Remeasure::NewMembers && !established(member));
+        if (!member.verified ||
+            (again && (pose->apply(member.model_mm) - p).norm() > config_.poseInlier_mm)) {
             // Measured under another frame (a re-based object, or a part that split off): it is
             // measured again in this one, and has to earn its place in the model again.
-            if (!member.verified ||
-                (pose->apply(member.model_mm) - p).norm() > config_.poseInlier_mm) {
-                member.model_mm = objectFromRig.apply(p);
-                member.samples = 1;
-                member.framesReliable = 0;
-                member.verified = true;
-                member.recentResidual_mm = 0.0;
-            }
+            member.model_mm = objectFromRig.apply(p);
+            member.samples = 1;
+            member.framesReliable = 0;
+            member.verified = true;
+            member.recentResidual_mm = 0.0;
         }
         const double residual = (pose->apply(member.model_mm) - p).norm();
         member.inlier = residual <= config_.poseInlier_mm;
@@ -281,7 +278,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
         for (std::size_t j = 0; j < o.members.size(); ++j) {
             if (j == i || !o.members[j].inlier)
                 continue;
-            Edge& e = edge(o, std::min(i, j), std::max(i, j));
+            Edge& e = edge(o, i, j);
             if (e.state == EdgeState::Active) {
                 e.state = EdgeState::Broken;
                 o.dirty = true;
@@ -295,7 +292,7 @@ std::optional<RigidTransform> ObjectCalibrator::consensusPose() {
     const std::size_t n = fitFrom_.size();
     if (n < 3)
         return std::nullopt;
-    const std::span<const double> votes = residual_.span();
+    const std::span<const double> votes = votes_.span();
     auto countInliers = [&](const RigidTransform& t) {
         double count = 0.0;
         for (std::size_t i = 0; i < n; ++i)
@@ -387,22 +384,22 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
     const auto mature = static_cast<std::uint32_t>(config_.edgeWindow_frames);
     adjacency_.clear();
     adjacency_.resize(n);
-    MarkerSet pending = MarkerSet::firstN(n);
+    MarkerSet withEdges, withMatureEdges;
     for (std::size_t i = 0; i < n; ++i)
         for (std::size_t j = i + 1; j < n; ++j) {
             const Edge& e = edge(o, i, j);
             if (e.state != EdgeState::Active)
                 continue;
+            withEdges.insert(i);
+            withEdges.insert(j);
             if (e.samples >= mature) {
                 adjacency_[i].insert(j);
                 adjacency_[j].insert(i);
-                pending.erase(i);
-                pending.erase(j);
+                withMatureEdges.insert(i);
+                withMatureEdges.insert(j);
             }
         }
-    for (std::size_t i = 0; i < n; ++i)
-        if (!adjacency_[i].empty() || !hasActiveEdge(o, i))
-            pending.erase(i);
+    const MarkerSet pending = withEdges.minus(withMatureEdges);
     const MarkerSet all = MarkerSet::firstN(n);
     if (!clustering_.cluster(adjacency_.span(), all.minus(pending))) {
         ++counters_.clusteringDeferred;
@@ -421,9 +418,8 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
     std::size_t kept = 0, keptEstablished = 0, keptSize = 0;
     for (std::size_t c = 0; c < clusters.size(); ++c) {
         std::size_t established = 0;
-        clusters[c].forEach([&](std::size_t i) {
-            established += o.members[i].framesReliable >= config_.minModelFrames ? 1u : 0u;
-        });
+        clusters[c].forEach(
+            [&](std::size_t i) { established += this->established(o.members[i]) ? 1u : 0u; });
         if (c == 0 || established > keptEstablished ||
             (established == keptEstablished && clusters[c].size() > keptSize)) {
             kept = c;
@@ -476,12 +472,11 @@ void ObjectCalibrator::removeGhosts(Object& o) {
     // new member long ago: the stale one goes.
     for (std::size_t i = o.members.size(); i-- > 0;) {
         Member& m = o.members[i];
-        if (!m.verified || m.framesReliable < config_.minModelFrames)
+        if (!m.verified || !established(m))
             continue;
         std::size_t partnersSeen = 0;
         for (std::size_t j = 0; j < o.members.size() && partnersSeen < 3; ++j)
-            if (j != i && o.members[j].visible && o.members[j].inlier &&
-                edge(o, std::min(i, j), std::max(i, j)).coVisible)
+            if (j != i && o.members[j].visible && o.members[j].inlier && edge(o, i, j).coVisible)
                 ++partnersSeen;
         if (partnersSeen < 3)
             continue;
@@ -495,14 +490,6 @@ void ObjectCalibrator::removeGhosts(Object& o) {
             ++counters_.ghostsRemoved;
         }
     }
-}
-
-bool ObjectCalibrator::hasActiveEdge(const Object& o, std::size_t member) const {
-    for (std::size_t j = 0; j < o.members.size(); ++j)
-        if (j != member &&
-            edge(o, std::min(j, member), std::max(j, member)).state == EdgeState::Active)
-            return true;
-    return false;
 }
 
 // --- Step 5: new markers near an occluded marker's predicted place are that marker. -----------
@@ -576,8 +563,7 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
             if (i == newMember || !markers_[o.members[i].marker].visible)
                 continue;
             const double d = (p - markers_[o.members[i].marker].position_rig_mm).norm();
-            edge(o, std::min(i, newMember), std::max(i, newMember)) =
-                Edge{EdgeState::Active, false, 1, d, d};
+            edge(o, i, newMember) = Edge{EdgeState::Active, false, 1, d, d};
         }
     };
 
@@ -615,6 +601,8 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
 
 std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
                                                            std::span<const std::size_t> seen) {
+    if (seen.size() < kRefindMinMarkers)
+        return std::nullopt;
     // Member pairs sorted by distance, so a candidate pair's distance finds its model pairs fast.
     memberPairs_.clear();
     const std::size_t n = o.members.size();
@@ -626,13 +614,12 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
                 memberPairs_.push_back(
                     {(o.members[i].model_mm - o.members[j].model_mm).norm(), i, j});
     }
-    if (memberPairs_.size() < 6 || seen.size() < kRefindMinMarkers)
+    if (memberPairs_.size() < 6)
         return std::nullopt;
     std::sort(
         memberPairs_.begin(), memberPairs_.end(),
         [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
     const double tol = config_.smin.tolerance_mm;
-    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     const std::size_t c = seen.size();
     auto position = [&](std::size_t candidate) -> const Vec3& {
         return markers_[seen[candidate]].position_rig_mm;
@@ -668,13 +655,8 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
                             continue;
                         std::size_t count = 0;
                         for (std::size_t k = 0; k < c; ++k)
-                            for (const Member& m : o.members)
-                                if (m.verified && !m.visible &&
-                                    (fit->transform.apply(m.model_mm) - position(k))
-                                            .squaredNorm() <= radius2) {
-                                    ++count;
-                                    break;
-                                }
+                            if (occludedMemberNear(o, fit->transform, position(k)) != kNone)
+                                ++count;
                         if (count > bestCount) {
                             bestCount = count;
                             best = fit->transform;
@@ -692,46 +674,48 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
     fitFrom_.clear();
     fitTo_.clear();
     for (std::size_t k = 0; k < c; ++k)
-        for (const Member& m : o.members)
-            if (m.verified && !m.visible &&
-                (best->apply(m.model_mm) - position(k)).squaredNorm() <= radius2) {
-                fitFrom_.push_back(m.model_mm);
-                fitTo_.push_back(position(k));
-                break;
-            }
+        if (const std::size_t m = occludedMemberNear(o, *best, position(k)); m != kNone) {
+            fitFrom_.push_back(o.members[m].model_mm);
+            fitTo_.push_back(position(k));
+        }
     const std::optional<RigidFit> refit = fitRigid(fitFrom_.span(), fitTo_.span());
     if (!refit || refit->rms_mm > config_.poseInlier_mm)
         return std::nullopt;
     return refit->transform;
 }
 
+std::size_t ObjectCalibrator::occludedMemberNear(const Object& o,
+                                                 const RigidTransform& rigFromObject,
+                                                 const Vec3& p_rig_mm) const {
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
+    for (std::size_t i = 0; i < o.members.size(); ++i) {
+        const Member& m = o.members[i];
+        if (m.verified && !m.visible &&
+            (rigFromObject.apply(m.model_mm) - p_rig_mm).squaredNorm() <= radius2)
+            return i;
+    }
+    return kNone;
+}
+
 void ObjectCalibrator::refind(Object& o) {
     const std::optional<RigidTransform> best = searchLost(o, candidates_.span());
     if (!best)
         return;
-    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
-    auto position = [&](std::size_t candidate) -> const Vec3& {
-        return markers_[candidates_[candidate]].position_rig_mm;
-    };
-    const std::size_t c = candidates_.size();
     // The candidates near a member's place are that member, seen again.
-    for (std::size_t k = c; k-- > 0;) {
-        const Vec3 p = position(k);
-        for (Member& m : o.members) {
-            if (!m.verified || m.visible || (best->apply(m.model_mm) - p).squaredNorm() > radius2)
-                continue;
-            KnownMarker& known = markers_[m.marker];
-            const std::size_t fresh = candidates_[k];
-            known.visible = true;
-            known.trackerId = markers_[fresh].trackerId;
-            known.position_rig_mm = p;
-            ++known.framesSeen;
-            releaseMarker(fresh);
-            m.visible = true;
-            candidates_.swapRemove(k);
-            ++counters_.markersReappeared;
-            break;
-        }
+    for (std::size_t k = candidates_.size(); k-- > 0;) {
+        const std::size_t fresh = candidates_[k];
+        const std::size_t i = occludedMemberNear(o, *best, markers_[fresh].position_rig_mm);
+        if (i == kNone)
+            continue;
+        KnownMarker& known = markers_[o.members[i].marker];
+        known.visible = true;
+        known.trackerId = markers_[fresh].trackerId;
+        known.position_rig_mm = markers_[fresh].position_rig_mm;
+        ++known.framesSeen;
+        releaseMarker(fresh);
+        o.members[i].visible = true;
+        candidates_.swapRemove(k);
+        ++counters_.markersReappeared;
     }
     o.posed = true;
     o.rigFromObject = *best;
@@ -798,11 +782,11 @@ void ObjectCalibrator::mergeDuplicates() {
                 // a while, so sitting on both proves nothing until it has stayed with both.
                 std::size_t onBody = 0;
                 for (const Member& a : fragment.members) {
-                    if (!a.visible || !a.verified || a.framesReliable < config_.minModelFrames)
+                    if (!a.visible || !a.verified || !established(a))
                         continue;
                     const Vec3& p = markers_[a.marker].position_rig_mm;
                     for (const Member& m : body.members)
-                        if (m.verified && m.framesReliable >= config_.minModelFrames &&
+                        if (m.verified && established(m) &&
                             (body.rigFromObject.apply(m.model_mm) - p).squaredNorm() <= radius2) {
                             ++onBody;
                             break;
@@ -881,7 +865,7 @@ void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& i
             const std::size_t a = indexInto[i], b = indexInto[j];
             if (a == kNone || b == kNone || a == b)
                 continue;
-            Edge& e = edge(into, std::min(a, b), std::max(a, b));
+            Edge& e = edge(into, a, b);
             const Edge& carried = edge(from, i, j);
             if (e.state == EdgeState::None)
                 e = carried;
@@ -902,7 +886,6 @@ ObjectCalibrator::Object* ObjectCalibrator::newObject() {
         o.members.clear();
         o.dirty = false;
         o.posed = false;
-        o.age = 0;
         o.bornFrame = counters_.frames;
         o.lostAtFrame = counters_.frames;
         return &o;
@@ -934,10 +917,9 @@ bool ObjectCalibrator::addMember(Object& o, std::size_t marker, const Vec3& mode
     member->recentResidual_mm = 0.0;
     member->expectedFrames = 0;
     member->missedFrames = 0;
-    for (std::size_t j = 0; j < stride_; ++j) {
-        edge(o, index, j) = Edge{};
-        edge(o, j, index) = Edge{};
-    }
+    for (std::size_t j = 0; j < stride_; ++j)
+        if (j != index)
+            edge(o, index, j) = Edge{};
     ++markers_[marker].objectCount;
     return true;
 }
@@ -946,13 +928,10 @@ void ObjectCalibrator::removeMember(Object& o, std::size_t member) {
     const std::size_t last = o.members.size() - 1;
     const std::size_t marker = o.members[member].marker;
     if (member != last) {
-        // The last member takes this index; its edges move with it (upper half: i < j).
-        for (std::size_t j = 0; j < last; ++j) {
-            if (j == member)
-                continue;
-            edge(o, std::min(member, j), std::max(member, j)) =
-                edge(o, std::min(last, j), std::max(last, j));
-        }
+        // The last member takes this index; its edges move with it.
+        for (std::size_t j = 0; j < last; ++j)
+            if (j != member)
+                edge(o, member, j) = edge(o, last, j);
     }
     o.members.swapRemove(member);
     KnownMarker& m = markers_[marker];
@@ -1002,10 +981,8 @@ std::size_t ObjectCalibrator::objectViews(std::span<CalibrationObjectView> out) 
         CalibrationObjectView& v = out[count++];
         v.id = o.id;
         v.markers = o.members.size();
-        v.established = static_cast<std::size_t>(
-            std::count_if(o.members.begin(), o.members.end(), [&](const Member& m) {
-                return m.framesReliable >= config_.minModelFrames;
-            }));
+        v.established = static_cast<std::size_t>(std::count_if(
+            o.members.begin(), o.members.end(), [&](const Member& m) { return established(m); }));
         v.visible = static_cast<std::size_t>(std::count_if(
             o.members.begin(), o.members.end(), [](const Member& m) { return m.visible; }));
         v.posed = o.posed;
@@ -1025,7 +1002,7 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
         chosen.clear();
         layout.clear();
         for (std::size_t i = 0; i < o.members.size(); ++i)
-            if (o.members[i].framesReliable >= config_.minModelFrames)
+            if (established(o.members[i]))
                 chosen.push_back(i);
         // One physical marker can have two identities in an object (lost, then born again
         // before its prediction caught it): the better-measured one goes into the model.
@@ -1055,9 +1032,7 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
             model.markers_model_mm.push_back(canonicalFromObject.apply(p));
         for (std::size_t a = 0; a < chosen.size(); ++a)
             for (std::size_t b = a + 1; b < chosen.size(); ++b) {
-                const std::size_t i = std::min(chosen[a], chosen[b]);
-                const std::size_t j = std::max(chosen[a], chosen[b]);
-                if (!edge(o, i, j).coVisible)
+                if (!edge(o, chosen[a], chosen[b]).coVisible)
                     continue;
                 model.edges.push_back(
                     {static_cast<std::uint16_t>(a), static_cast<std::uint16_t>(b),

@@ -149,7 +149,7 @@ public:
                 v.objectId = o.id;
                 v.markerId = markers_[m.marker].id;
                 v.visible = m.visible;
-                v.established = m.framesReliable >= config_.minModelFrames;
+                v.established = established(m);
                 v.position_rig_mm = m.visible ? markers_[m.marker].position_rig_mm
                                               : o.rigFromObject.apply(m.model_mm);
                 visit(v);
@@ -206,21 +206,33 @@ private:
         bool active = false;
         std::uint32_t id = 0;
         BoundedVector<Member> members;
-        /// Edge between members i and j at i * stride + j (both halves kept).
+        /// Edges between members, one per pair: see edgeIndex().
         BoundedVector<Edge> edges;
         bool dirty = false;
         bool posed = false;
         RigidTransform rigFromObject{};
-        std::uint32_t age = 0;
         /// Frame (counters.frames) of its creation, and of the last loss of its pose.
         std::uint64_t bornFrame = 0;
         std::uint64_t lostAtFrame = 0;
     };
 
-    Edge& edge(Object& o, std::size_t i, std::size_t j) { return o.edges[i * stride_ + j]; }
-    const Edge& edge(const Object& o, std::size_t i, std::size_t j) const {
-        return o.edges[i * stride_ + j];
+    /// Pair (i, j), i != j, in either order, in a triangular table: pairs of members below j
+    /// come before those of j.
+    static std::size_t edgeIndex(std::size_t i, std::size_t j) {
+        if (i > j)
+            std::swap(i, j);
+        return j * (j - 1) / 2 + i;
     }
+    static std::size_t edgeCount(std::size_t members) { return members * (members - 1) / 2; }
+    Edge& edge(Object& o, std::size_t i, std::size_t j) { return o.edges[edgeIndex(i, j)]; }
+    const Edge& edge(const Object& o, std::size_t i, std::size_t j) const {
+        return o.edges[edgeIndex(i, j)];
+    }
+    bool established(const Member& m) const { return m.framesReliable >= config_.minModelFrames; }
+    /// The first occluded, verified member of \a o that \a rigFromObject puts within the
+    /// reappearance radius of \a p_rig_mm; kNone when there is none.
+    std::size_t occludedMemberNear(const Object& o, const RigidTransform& rigFromObject,
+                                   const Vec3& p_rig_mm) const;
 
     void bindTrackedMarkers(std::span<const TrackedMarker> tracked);
     void removeInvalidMarkers();
@@ -232,7 +244,6 @@ private:
     std::optional<RigidTransform> consensusPose();
     void rebase(Object& o);
     void clusterObject(std::size_t objectIndex);
-    bool hasActiveEdge(const Object& o, std::size_t member) const;
     void removeGhosts(Object& o);
     void recogniseReappearing(std::span<const TrackedMarker> tracked);
     void insertNewMarkers(std::span<const TrackedMarker> tracked);
@@ -263,11 +274,14 @@ private:
     BoundedVector<std::pair<std::uint32_t, std::size_t>> byTrackerId_;
     /// Per tracked marker of this frame: the known marker it is, or kNone.
     BoundedVector<std::size_t> knownOfTracked_;
-    /// Scratch of the size of one object.
+    /// Scratch of the size of one object: point pairs to fit, and each pair's vote.
     BoundedVector<Vec3> fitFrom_;
     BoundedVector<Vec3> fitTo_;
-    BoundedVector<std::size_t> fitMember_;
-    BoundedVector<double> residual_;
+    BoundedVector<double> votes_;
+    /// Scratch of updateObject: where each member is now (rig frame, mm), and how that is known.
+    enum class Whereabouts : std::uint8_t { Seen, Predicted, Unknown };
+    BoundedVector<Vec3> positionNow_;
+    BoundedVector<Whereabouts> whereabouts_;
     FixedVector<MarkerSet, MarkerSet::kCapacity> adjacency_;
     BoundedVector<std::uint32_t> stamp_;
     BoundedVector<std::size_t> candidates_;
