@@ -18,11 +18,11 @@
 
 #include <CLI/CLI.hpp>
 
-#include "core/blob_detector.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
+#include "tests/eval/sim_image_pipeline.hpp"
 #include "tests/support/model_alignment.hpp"
 
 using namespace edgetrack;
@@ -148,15 +148,7 @@ int main(int argc, char** argv) {
         return 2;
     }
     const sim::World world(std::move(*scene), seed);
-    const sim::RigSpec& rigSpec = world.scene().rig;
-    const sim::FrameRenderer renderer(rigSpec.width_px, rigSpec.height_px,
-                                      world.scene().background_dn, world.scene().noiseSigma_dn,
-                                      seed);
-    const BlobDetectorConfig blobConfig;
-    BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
-    BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
-    const StereoConfig stereoConfig;
-    StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
+    test::SimImagePipeline pipeline(world, seed, StereoConfig{});
     ObjectCalibrator calibrator(config);
     std::vector<MarkerModel> models;
     for (std::size_t i = 0; i < config.maxObjects; ++i)
@@ -171,11 +163,6 @@ int main(int argc, char** argv) {
         framesSeen.emplace_back(o.object.markers.size(), 0);
     }
 
-    std::vector<std::uint8_t> image0(
-        static_cast<std::size_t>(rigSpec.width_px * rigSpec.height_px));
-    std::vector<std::uint8_t> image1(image0.size());
-    BoundedVector<Blob> blobs0(blobConfig.maxBlobs), blobs1(blobConfig.maxBlobs);
-    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
     std::vector<Vec3> points;
     sim::Observation observation;
     std::vector<int> visible;
@@ -187,18 +174,10 @@ int main(int argc, char** argv) {
     for (std::int64_t f = 0; f < frames; ++f) {
         const auto frame = static_cast<std::uint64_t>(f);
         world.observe(frame, observation);
-        points.clear();
-        if (level == "images") {
-            renderer.render(image0, rigSpec.width_px, 0, observation, 1.0, frame);
-            renderer.render(image1, rigSpec.width_px, 1, observation, 1.0, frame);
-            detector0.detect(image0.data(), rigSpec.width_px, blobs0);
-            detector1.detect(image1.data(), rigSpec.width_px, blobs1);
-            stereo.match(blobs0.span(), blobs1.span(), markers);
-            for (const StereoMarker& m : markers)
-                points.push_back(m.position_rig_mm);
-        } else {
+        if (level == "images")
+            pipeline.run(observation, frame, false, points);
+        else
             sim::pointsFromObservation(observation, noise, random, points);
-        }
         calibrator.update(observation.time_s, points);
         sim::separatelyVisible(observation, visible);
         for (const int source : visible)

@@ -19,6 +19,7 @@
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
+#include "tests/eval/sim_image_pipeline.hpp"
 
 using namespace edgetrack;
 
@@ -75,21 +76,8 @@ int main(int argc, char** argv) {
         return 2;
     }
     const sim::World world(std::move(*scene), seed);
-    const sim::RigSpec& rigSpec = world.scene().rig;
-    const sim::FrameRenderer renderer(rigSpec.width_px, rigSpec.height_px,
-                                      world.scene().background_dn, world.scene().noiseSigma_dn,
-                                      seed);
-    const BlobDetectorConfig blobConfig;
-    BlobDetector detector0(blobConfig, rigSpec.width_px, rigSpec.height_px);
-    BlobDetector detector1(blobConfig, rigSpec.width_px, rigSpec.height_px);
-    StereoMatcher stereo(world.rig(), stereoConfig, blobConfig.maxBlobs);
+    test::SimImagePipeline pipeline(world, seed, stereoConfig);
     MarkerTracker tracker(trackConfig);
-
-    std::vector<std::uint8_t> image0(
-        static_cast<std::size_t>(rigSpec.width_px * rigSpec.height_px));
-    std::vector<std::uint8_t> image1(image0.size());
-    BoundedVector<Blob> blobs0(blobConfig.maxBlobs), blobs1(blobConfig.maxBlobs);
-    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
     std::vector<Vec3> points;
     sim::Observation observation;
     std::vector<int> visible;
@@ -101,17 +89,7 @@ int main(int argc, char** argv) {
     for (std::int64_t f = 0; f < frames; ++f) {
         const auto frame = static_cast<std::uint64_t>(f);
         world.observe(frame, observation);
-        renderer.render(image0, rigSpec.width_px, 0, observation, 1.0, frame);
-        renderer.render(image1, rigSpec.width_px, 1, observation, 1.0, frame);
-        detector0.detect(image0.data(), rigSpec.width_px, blobs0);
-        detector1.detect(image1.data(), rigSpec.width_px, blobs1);
-        if (matcher == "svd")
-            stereo.match(blobs0.span(), blobs1.span(), markers);
-        else
-            stereo.matchEpipolarOnly(blobs0.span(), blobs1.span(), markers);
-        points.clear();
-        for (const StereoMarker& m : markers)
-            points.push_back(m.position_rig_mm);
+        pipeline.run(observation, frame, matcher == "epipolar", points);
         const std::span<const TrackedMarker> tracked = tracker.update(observation.time_s, points);
 
         sim::separatelyVisible(observation, visible);
@@ -139,7 +117,7 @@ int main(int argc, char** argv) {
                 // Why: no blob where the marker projects (merged, rejected), or stereo missed it.
                 bool blobs = true;
                 for (int c = 0; c < 2; ++c) {
-                    const auto& list = c == 0 ? blobs0 : blobs1;
+                    const auto& list = pipeline.blobs(c);
                     bool near = false;
                     for (const Blob& b : list)
                         near =
@@ -227,14 +205,14 @@ int main(int argc, char** argv) {
                     static_cast<unsigned long long>(totals.continuedMarkerFrames),
                     static_cast<unsigned long long>(totals.idBreaks),
                     static_cast<unsigned long long>(totals.idSwaps), switches * 1e4);
-    const StereoCounters& sc = stereo.counters();
+    const StereoCounters& sc = pipeline.stereo().counters();
     std::printf("  stereo: largest block %llu, block overflows %llu, rejected by ray gap %llu, by "
                 "reprojection %llu\n",
                 static_cast<unsigned long long>(sc.largestBlock),
                 static_cast<unsigned long long>(sc.blockOverflow),
                 static_cast<unsigned long long>(sc.rejectedRayGap),
                 static_cast<unsigned long long>(sc.rejectedReprojection));
-    const BlobCounters& bc = detector0.counters();
+    const BlobCounters& bc = pipeline.detector(0).counters();
     std::printf("  blobs (camera 0): accepted %llu, not round %llu, small %llu, large %llu\n",
                 static_cast<unsigned long long>(bc.accepted),
                 static_cast<unsigned long long>(bc.rejectedNotRound),
