@@ -76,8 +76,9 @@ void PyramidClustering::searchCliques(const MarkerSet& clique, MarkerSet candida
         return;
     }
     if (candidates.empty()) {
-        if (excluded.empty() && clique.size() >= kPyramid)
-            cliques_.push_back(clique);
+        // A clique that does not fit ends the run: its result would be incomplete anyway.
+        if (excluded.empty() && clique.size() >= kPyramid && !cliques_.push_back(clique))
+            abandoned_ = true;
         return;
     }
     // No clique through this branch can reach a pyramid's size.
