@@ -14,6 +14,7 @@
 #include "firmware_app/reconstruct_command.hpp"
 #include "firmware_app/recording/recording.hpp"
 #include "firmware_app/sim_command.hpp"
+#include "firmware_app/track_command.hpp"
 
 namespace edgetrack::app {
 
@@ -191,8 +192,20 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         }
         return 0;
     }
-    if (trackCommand->parsed())
-        return notBuilt(err, "track", 6);
+    if (trackCommand->parsed()) {
+        TrackOptions options;
+        options.models = track.models;
+        options.input = track.input;
+        options.out = track.out;
+        if (!track.from.empty())
+            options.from = recording::parseLevel(track.from);
+        options.showProgress = &err == &std::cerr && ::isatty(STDERR_FILENO) != 0;
+        if (Status s = runTrack(options, out, err); !s) {
+            err << "edgetrack track: " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        return 0;
+    }
     if (modelCommand->parsed())
         return notBuilt(err, "model", 7);
     return kExitUsage;

@@ -1,0 +1,576 @@
+// Model-based tracking (paper section 5): prediction first, then the hashtable subgraph search.
+#include "core/model_tracker.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+namespace {
+
+// A hypothesis fit and its matching cost about as much as this many candidate pair checks; the
+// search budget counts both, so that it bounds time and not only one kind of work.
+constexpr std::uint64_t kHypothesisCost = 64;
+
+// Match-and-fit passes at most: a wide first association after a prediction settles in two more;
+// a pass that matches the same points as the last fit ends the refinement early.
+constexpr int kMaxPasses = 3;
+// Outlying matches dropped at most per pose (a spurious point or two beside hidden markers).
+constexpr int kMaxTrims = 2;
+
+std::size_t findRoot(std::vector<std::size_t>& parent, std::size_t i) {
+    while (parent[i] != i)
+        i = parent[i] = parent[parent[i]];
+    return i;
+}
+
+} // namespace
+
+ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrackingConfig& config)
+    : config_(config) {
+    valid_ =
+        config.distanceTolerance_mm > 0.0 && config.matchRadius_mm > 0.0 &&
+        config.maxRms_mm > 0.0 && config.predictionRadius_mm >= config.matchRadius_mm &&
+        config.maxPoints > 0 &&
+        config.maxPoints <= static_cast<std::size_t>(std::numeric_limits<std::int16_t>::max()) &&
+        config.maxCandidatesPerMarker > 0 && config.minTrackedMarkers >= 3 &&
+        models.size() < static_cast<std::size_t>(std::numeric_limits<std::int16_t>::max());
+    for (const MarkerModel& m : models)
+        valid_ = valid_ && m.markers_model_mm.size() <= MarkerSet::kCapacity;
+    if (!valid_)
+        return;
+
+    const double binWidth = config.distanceTolerance_mm;
+    std::vector<std::uint32_t> binCounts;
+    for (const MarkerModel& m : models) {
+        ModelSlot slot;
+        slot.firstMarker = markers_model_mm_.size();
+        slot.markerCount = m.markers_model_mm.size();
+        slot.sMin = std::max<std::uint32_t>(m.sMin, 3);
+        maxModelMarkers_ = std::max(maxModelMarkers_, slot.markerCount);
+        Vec3 centroid = Vec3::Zero();
+        for (const Vec3& p : m.markers_model_mm) {
+            markers_model_mm_.push_back(p);
+            adjacency_.emplace_back();
+            centroid += p;
+        }
+        if (slot.markerCount > 0)
+            centroid /= static_cast<double>(slot.markerCount);
+        slot.centroid_model_mm = centroid;
+        for (const Vec3& p : m.markers_model_mm)
+            slot.radius_mm = std::max(slot.radius_mm, (p - centroid).norm());
+
+        double longest = 0.0;
+        for (const ModelEdge& e : m.edges) {
+            adjacency_[slot.firstMarker + e.from].insert(e.to);
+            adjacency_[slot.firstMarker + e.to].insert(e.from);
+            longest = std::max(longest, e.distance_mm);
+        }
+        slot.firstBin = binCounts.size();
+        slot.binCount = static_cast<std::size_t>(longest / binWidth) + 2;
+        binCounts.resize(slot.firstBin + slot.binCount, 0);
+        for (const ModelEdge& e : m.edges)
+            ++binCounts[slot.firstBin + static_cast<std::size_t>(e.distance_mm / binWidth)];
+        slots_.push_back(slot);
+    }
+
+    // Copies of one layout are found from the models themselves: model files do not say it.
+    std::vector<MarkerModel> analysed;
+    for (const MarkerModel& m : models) {
+        analysed.emplace_back(m.markers_model_mm.size());
+        analysed.back().assign(m);
+    }
+    computeSmin(analysed, SminConfig{config.distanceTolerance_mm, 0.8, 4});
+    std::vector<std::size_t> parent(models.size());
+    std::iota(parent.begin(), parent.end(), std::size_t{0});
+    for (std::size_t i = 0; i < analysed.size(); ++i)
+        if (analysed[i].sameShapeAs >= 0)
+            parent[findRoot(parent, i)] =
+                findRoot(parent, static_cast<std::size_t>(analysed[i].sameShapeAs));
+    for (std::size_t i = 0; i < slots_.size(); ++i)
+        slots_[i].shapeGroup = findRoot(parent, i);
+
+    binStart_.assign(binCounts.size() + 1, 0);
+    for (std::size_t b = 0; b < binCounts.size(); ++b)
+        binStart_[b + 1] = binStart_[b] + binCounts[b];
+    entries_.resize(binStart_.back());
+    std::vector<std::uint32_t> fill(binStart_.begin(), binStart_.end() - 1);
+    for (std::size_t i = 0; i < models.size(); ++i)
+        for (const ModelEdge& e : models[i].edges) {
+            const std::size_t bin =
+                slots_[i].firstBin + static_cast<std::size_t>(e.distance_mm / binWidth);
+            entries_[fill[bin]++] = HashEntry{e.from, e.to, e.distance_mm};
+        }
+
+    bodies_.resize(models.size());
+    for (std::size_t i = 0; i < models.size(); ++i)
+        bodies_[i].modelId = models[i].id;
+    history_.resize(models.size());
+    searched_.assign(models.size(), 0);
+
+    pointOwner_.assign(config.maxPoints, -1);
+    explained_.assign(config.maxPoints, 0);
+    claimant_.assign(config.maxPoints, -1);
+    claimDistance_.assign(config.maxPoints, 0.0);
+    nearby_.assign(config.maxPoints, 0);
+    candidateCount_.assign(maxModelMarkers_, 0);
+    candidates_.resize(maxModelMarkers_ * config.maxCandidatesPerMarker);
+    agreement_.assign(config.maxCandidatesPerMarker, 0);
+    matchOfMarker_.assign(maxModelMarkers_, -1);
+    bestMatchOfMarker_.assign(maxModelMarkers_, -1);
+    fittedMatch_.assign(maxModelMarkers_, -1);
+    fitFrom_ = BoundedVector<Vec3>(maxModelMarkers_);
+    fitTo_ = BoundedVector<Vec3>(maxModelMarkers_);
+}
+
+void ModelTracker::reset() {
+    for (std::size_t i = 0; i < bodies_.size(); ++i) {
+        const std::uint32_t id = bodies_[i].modelId;
+        bodies_[i] = TrackedBody{};
+        bodies_[i].modelId = id;
+        history_[i] = History{};
+    }
+}
+
+void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
+    if (!valid_)
+        return;
+    ++counters_.frames;
+    frameChecks_ = 0;
+    pointCount_ = std::min(points_rig_mm.size(), config_.maxPoints);
+    counters_.pointOverflow += points_rig_mm.size() - pointCount_;
+    points_ = points_rig_mm.first(pointCount_);
+    std::fill_n(pointOwner_.begin(), pointCount_, std::int16_t{-1});
+    std::fill(searched_.begin(), searched_.end(), std::uint8_t{0});
+
+    for (std::size_t b = 0; b < bodies_.size(); ++b) {
+        bodies_[b].source = PoseSource::None;
+        bodies_[b].markers = 0;
+        bodies_[b].rms_mm = 0.0;
+        RigidTransform predicted;
+        if (!predict(b, time_s, predicted))
+            continue;
+        if (confirmPrediction(b, predicted))
+            ++counters_.predictedHits;
+        else
+            ++counters_.predictionFailures;
+    }
+
+    for (std::size_t b = 0; b < bodies_.size(); ++b) {
+        if (bodies_[b].found() || slots_[b].markerCount < 4)
+            continue;
+        if (!budgetLeft()) {
+            ++counters_.searchesSkipped;
+            continue;
+        }
+        search(b, time_s);
+        searched_[b] = 1;
+    }
+    if (!budgetLeft())
+        ++counters_.budgetExhausted;
+    counters_.pairChecks += frameChecks_;
+
+    for (std::size_t b = 0; b < bodies_.size(); ++b) {
+        if (!bodies_[b].found())
+            continue;
+        History& h = history_[b];
+        h.hasPrevious = h.hasLast && time_s - h.last_s <= config_.predictionHorizon_s;
+        h.previous = h.last;
+        h.previous_s = h.last_s;
+        h.last = bodies_[b].T_rig_from_model;
+        h.last_s = time_s;
+        h.hasLast = true;
+        bodies_[b].lastFound_s = time_s;
+    }
+}
+
+bool ModelTracker::predict(std::size_t body, double time_s,
+                           RigidTransform& T_rig_from_model) const {
+    const History& h = history_[body];
+    if (!h.hasLast || time_s - h.last_s > config_.predictionHorizon_s || time_s < h.last_s)
+        return false;
+    T_rig_from_model = h.last;
+    const double interval_s = h.last_s - h.previous_s;
+    if (!h.hasPrevious || !(interval_s > 0.0))
+        return true;
+    // Constant velocity and turn rate of the model's centroid, so that turning does not swing
+    // the prediction about a far-away model origin.
+    const double ahead = (time_s - h.last_s) / interval_s;
+    const Vec3& c = slots_[body].centroid_model_mm;
+    const Vec3 lastCentre = h.last.apply(c);
+    const Vec3 centre = lastCentre + ahead * (lastCentre - h.previous.apply(c));
+    const Eigen::AngleAxisd turn(h.last.rotation * h.previous.rotation.inverse());
+    const Quat rotation =
+        (Quat(Eigen::AngleAxisd(ahead * turn.angle(), turn.axis())) * h.last.rotation).normalized();
+    T_rig_from_model.rotation = rotation;
+    T_rig_from_model.translation_mm = centre - rotation * c;
+    return true;
+}
+
+bool ModelTracker::confirmPrediction(std::size_t body, const RigidTransform& predicted) {
+    Hypothesis h;
+    RigidTransform pose = predicted;
+    if (!refine(body, pose, config_.predictionRadius_mm, config_.minTrackedMarkers, h))
+        return false;
+    TrackedBody& out = bodies_[body];
+    out.source = PoseSource::Predicted;
+    out.T_rig_from_model = h.T_rig_from_model;
+    out.markers = h.markers;
+    out.rms_mm = h.rms_mm;
+    claim(body);
+    return true;
+}
+
+std::size_t ModelTracker::matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
+                                       double radius_mm) {
+    const ModelSlot& slot = slots_[body];
+    const std::span<const Vec3> model = modelMarkers(body);
+    // Only points within the model's reach of its placed centroid can match any marker.
+    const Vec3 centre = T_rig_from_model.apply(slot.centroid_model_mm);
+    const double reach = slot.radius_mm + radius_mm;
+    std::size_t nearbyCount = 0;
+    for (std::size_t j = 0; j < pointCount_; ++j) {
+        claimant_[j] = -1;
+        if (pointOwner_[j] < 0 && (points_[j] - centre).squaredNorm() <= reach * reach)
+            nearby_[nearbyCount++] = static_cast<std::uint16_t>(j);
+    }
+    const double radius2 = radius_mm * radius_mm;
+    const Mat3 rotation = T_rig_from_model.rotationMatrix();
+    std::size_t matches = 0;
+    for (std::size_t i = 0; i < model.size(); ++i) {
+        matchOfMarker_[i] = -1;
+        const Vec3 placed = rotation * model[i] + T_rig_from_model.translation_mm;
+        std::int32_t nearest = -1;
+        double nearest2 = radius2;
+        for (std::size_t n = 0; n < nearbyCount; ++n) {
+            const double d2 = (points_[nearby_[n]] - placed).squaredNorm();
+            if (d2 < nearest2) {
+                nearest2 = d2;
+                nearest = nearby_[n];
+            }
+        }
+        if (nearest < 0)
+            continue;
+        const auto j = static_cast<std::size_t>(nearest);
+        // A point near two placed markers belongs to the nearer one.
+        if (claimant_[j] >= 0) {
+            if (claimDistance_[j] <= nearest2)
+                continue;
+            matchOfMarker_[static_cast<std::size_t>(claimant_[j])] = -1;
+            --matches;
+        }
+        claimant_[j] = static_cast<std::int32_t>(i);
+        claimDistance_[j] = nearest2;
+        matchOfMarker_[i] = nearest;
+        ++matches;
+    }
+    return matches;
+}
+
+bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, double firstRadius_mm,
+                          std::size_t minMatches, Hypothesis& out) {
+    const std::span<const Vec3> model = modelMarkers(body);
+    double radius = firstRadius_mm;
+    std::size_t matches = 0;
+    bool fitted = false;
+    for (int pass = 0; pass < kMaxPasses; ++pass) {
+        matches = matchMarkers(body, T_rig_from_model, radius);
+        if (matches < std::max<std::size_t>(minMatches, 3))
+            return false;
+        // The same matches as the last fit: that fit is the answer.
+        if (fitted && std::equal(matchOfMarker_.begin(),
+                                 matchOfMarker_.begin() + static_cast<std::ptrdiff_t>(model.size()),
+                                 fittedMatch_.begin()))
+            break;
+        fitFrom_.clear();
+        fitTo_.clear();
+        for (std::size_t i = 0; i < model.size(); ++i)
+            if (matchOfMarker_[i] >= 0) {
+                fitFrom_.push_back(model[i]);
+                fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
+            }
+        const std::optional<RigidFit> fit = fitRigid(fitFrom_.span(), fitTo_.span());
+        if (!fit)
+            return false;
+        T_rig_from_model = fit->transform;
+        out.rms_mm = fit->rms_mm;
+        std::copy_n(matchOfMarker_.begin(), model.size(), fittedMatch_.begin());
+        fitted = true;
+        radius = config_.matchRadius_mm;
+    }
+    // The matches must be those the final pose was fitted to.
+    std::copy_n(fittedMatch_.begin(), model.size(), matchOfMarker_.begin());
+    matches = trimOutliers(body, T_rig_from_model, matches, std::max<std::size_t>(minMatches, 3),
+                           out.rms_mm);
+    out.T_rig_from_model = T_rig_from_model;
+    out.markers = static_cast<std::uint32_t>(matches);
+    return out.rms_mm <= config_.maxRms_mm;
+}
+
+std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_from_model,
+                                       std::size_t matches, std::size_t minMatches,
+                                       double& rms_mm) {
+    const std::span<const Vec3> model = modelMarkers(body);
+    // An outlier pulls the fit towards itself, so it is judged against the fit of the others:
+    // each match is left out in turn, and the one whose absence fits best is the suspect.
+    for (int trim = 0; trim < kMaxTrims && matches > minMatches && rms_mm > config_.trimAbove_mm;
+         ++trim) {
+        double bestRms = rms_mm;
+        std::size_t suspect = model.size();
+        RigidTransform suspectFit;
+        for (std::size_t left = 0; left < model.size(); ++left) {
+            if (matchOfMarker_[left] < 0)
+                continue;
+            fitFrom_.clear();
+            fitTo_.clear();
+            for (std::size_t i = 0; i < model.size(); ++i)
+                if (i != left && matchOfMarker_[i] >= 0) {
+                    fitFrom_.push_back(model[i]);
+                    fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
+                }
+            const std::optional<RigidFit> fit = fitRigid(fitFrom_.span(), fitTo_.span());
+            if (fit && fit->rms_mm < bestRms) {
+                bestRms = fit->rms_mm;
+                suspect = left;
+                suspectFit = fit->transform;
+            }
+        }
+        if (suspect == model.size())
+            break;
+        const double residual = (points_[static_cast<std::size_t>(matchOfMarker_[suspect])] -
+                                 suspectFit.apply(model[suspect]))
+                                    .norm();
+        if (residual <= std::max(config_.outlierFloor_mm, config_.outlierFactor * bestRms))
+            break;
+        matchOfMarker_[suspect] = -1;
+        --matches;
+        T_rig_from_model = suspectFit;
+        rms_mm = bestRms;
+    }
+    return matches;
+}
+
+void ModelTracker::claim(std::size_t body) {
+    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
+        if (matchOfMarker_[i] >= 0)
+            pointOwner_[static_cast<std::size_t>(matchOfMarker_[i])] =
+                static_cast<std::int16_t>(body);
+}
+
+void ModelTracker::search(std::size_t body, double time_s) {
+    std::size_t freePoints = 0;
+    for (std::size_t p = 0; p < pointCount_; ++p)
+        freePoints += pointOwner_[p] < 0;
+    if (freePoints < slots_[body].sMin)
+        return;
+    ++counters_.searches;
+    std::fill_n(explained_.begin(), pointCount_, std::uint8_t{0});
+    Hypothesis best;
+    bool haveBest = false;
+    for (std::size_t p = 0; p < pointCount_; ++p) {
+        if (pointOwner_[p] >= 0 || explained_[p])
+            continue;
+        if (!budgetLeft()) {
+            ++counters_.searchesSkipped;
+            break;
+        }
+        searchFrom(body, p, time_s, best, haveBest);
+    }
+    if (!haveBest)
+        return;
+    ++counters_.searchHits;
+    std::copy_n(bestMatchOfMarker_.begin(), slots_[body].markerCount, matchOfMarker_.begin());
+    TrackedBody& out = bodies_[body];
+    out.source = PoseSource::Searched;
+    out.T_rig_from_model = best.T_rig_from_model;
+    out.markers = best.markers;
+    out.rms_mm = best.rms_mm;
+    claim(body);
+}
+
+void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
+                              bool& haveBest) {
+    const ModelSlot& slot = slots_[body];
+    const std::span<const Vec3> model = modelMarkers(body);
+    const double tolerance = config_.distanceTolerance_mm;
+    const std::size_t perMarker = config_.maxCandidatesPerMarker;
+    std::fill_n(candidateCount_.begin(), slot.markerCount, 0U);
+    auto addCandidate = [&](std::size_t marker, std::size_t point, std::size_t other) {
+        std::uint32_t& count = candidateCount_[marker];
+        if (count >= perMarker) {
+            ++counters_.candidateOverflow;
+            return;
+        }
+        candidates_[marker * perMarker + count++] =
+            Candidate{static_cast<std::uint16_t>(point), static_cast<std::uint16_t>(other)};
+    };
+
+    // The hashtable lookups: every free point q at a model edge's length from p.
+    for (std::size_t q = 0; q < pointCount_; ++q) {
+        if (q == p || pointOwner_[q] >= 0)
+            continue;
+        ++frameChecks_;
+        const double d = (points_[q] - points_[p]).norm();
+        const auto bin = static_cast<std::size_t>(d / tolerance);
+        const std::size_t firstBin = bin > 0 ? bin - 1 : 0;
+        const std::size_t lastBin = std::min(bin + 1, slot.binCount - 1);
+        for (std::size_t b = firstBin; b <= lastBin; ++b) {
+            const std::size_t global = slot.firstBin + b;
+            for (std::uint32_t e = binStart_[global]; e < binStart_[global + 1]; ++e) {
+                const HashEntry& entry = entries_[e];
+                if (std::abs(entry.distance_mm - d) > tolerance)
+                    continue;
+                addCandidate(entry.a, q, entry.b);
+                addCandidate(entry.b, q, entry.a);
+            }
+        }
+    }
+
+    // Two candidates of one marker V (p's possible identity) agree when they are different
+    // points and markers, co-visible, and as far apart as their markers.
+    auto agree = [&](const Candidate& x, const Candidate& y) {
+        ++frameChecks_;
+        return x.point != y.point && x.marker != y.marker &&
+               adjacency(body, x.marker).contains(y.marker) &&
+               std::abs((points_[x.point] - points_[y.point]).norm() -
+                        (model[x.marker] - model[y.marker]).norm()) <= tolerance;
+    };
+
+    // A body found with m markers, p among them as marker v, shows m - 1 candidates of v that
+    // agree pairwise (markers seen together are co-visible; their distances match). So only
+    // candidates that agree with at least S_min - 2 others (the (S_min - 2)-core of the agreement
+    // graph) can take part, and a 4-clique is three of them that agree with each other.
+    const std::size_t degreeNeeded = std::max<std::size_t>(slot.sMin, 4) - 2;
+    for (std::size_t v = 0; v < slot.markerCount; ++v) {
+        const std::size_t count = candidateCount_[v];
+        if (count < degreeNeeded + 1)
+            continue;
+        if (!budgetLeft())
+            return;
+        const Candidate* list = &candidates_[v * perMarker];
+        for (std::size_t a = 0; a < count; ++a)
+            agreement_[a] = 0;
+        for (std::size_t a = 0; a < count; ++a)
+            for (std::size_t b = a + 1; b < count; ++b)
+                if (agree(list[a], list[b])) {
+                    agreement_[a] |= std::uint64_t{1} << b;
+                    agreement_[b] |= std::uint64_t{1} << a;
+                }
+        std::uint64_t alive = count == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << count) - 1;
+        for (bool pruned = true; pruned;) {
+            pruned = false;
+            for (std::uint64_t rest = alive; rest != 0; rest &= rest - 1) {
+                const auto a = static_cast<std::size_t>(std::countr_zero(rest));
+                if (static_cast<std::size_t>(std::popcount(agreement_[a] & alive)) < degreeNeeded) {
+                    alive &= ~(std::uint64_t{1} << a);
+                    pruned = true;
+                }
+            }
+        }
+        for (std::uint64_t restA = alive; restA != 0; restA &= restA - 1) {
+            const auto a = static_cast<std::size_t>(std::countr_zero(restA));
+            const std::uint64_t withA = agreement_[a] & alive & ~((std::uint64_t{2} << a) - 1);
+            for (std::uint64_t restB = withA; restB != 0; restB &= restB - 1) {
+                const auto b = static_cast<std::size_t>(std::countr_zero(restB));
+                const std::uint64_t withAB = withA & agreement_[b] & ~((std::uint64_t{2} << b) - 1);
+                for (std::uint64_t restC = withAB; restC != 0; restC &= restC - 1) {
+                    const auto c = static_cast<std::size_t>(std::countr_zero(restC));
+                    if (!budgetLeft())
+                        return;
+                    const Candidate clique[4] = {
+                        Candidate{static_cast<std::uint16_t>(p), static_cast<std::uint16_t>(v)},
+                        list[a], list[b], list[c]};
+                    evaluateClique(body, clique, time_s, best, haveBest);
+                    // p is explained once one of its cliques gave a body: its other cliques
+                    // would only find the same pose again.
+                    if (explained_[p])
+                        return;
+                }
+            }
+        }
+    }
+}
+
+void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> clique,
+                                  double time_s, Hypothesis& best, bool& haveBest) {
+    ++counters_.hypotheses;
+    frameChecks_ += kHypothesisCost;
+    const std::span<const Vec3> model = modelMarkers(body);
+    Vec3 from[4];
+    Vec3 to[4];
+    for (std::size_t i = 0; i < 4; ++i) {
+        from[i] = model[clique[i].marker];
+        to[i] = points_[clique[i].point];
+    }
+    const std::optional<RigidFit> fit = fitRigid(from, to);
+    if (!fit || fit->rms_mm > config_.maxRms_mm)
+        return;
+    RigidTransform pose = fit->transform;
+    Hypothesis h;
+    if (!refine(body, pose, config_.matchRadius_mm, slots_[body].sMin, h))
+        return;
+    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
+        if (matchOfMarker_[i] >= 0)
+            explained_[static_cast<std::size_t>(matchOfMarker_[i])] = 1;
+    const Vec3 centre = h.T_rig_from_model.apply(slots_[body].centroid_model_mm);
+    if (nearerCopyWants(body, centre, time_s)) {
+        ++counters_.identityYields;
+        return;
+    }
+    bool better = !haveBest;
+    if (haveBest) {
+        const History& history = history_[body];
+        if (hasCopy(body) && remembers(body, time_s)) {
+            // Copies keep their identity by position: the hypothesis nearest to where it was.
+            const Vec3 last = history.last.apply(slots_[body].centroid_model_mm);
+            const Vec3 bestCentre = best.T_rig_from_model.apply(slots_[body].centroid_model_mm);
+            better = (centre - last).squaredNorm() < (bestCentre - last).squaredNorm();
+        } else {
+            better =
+                h.markers > best.markers || (h.markers == best.markers && h.rms_mm < best.rms_mm);
+        }
+    }
+    if (!better)
+        return;
+    best = h;
+    haveBest = true;
+    std::copy_n(matchOfMarker_.begin(), slots_[body].markerCount, bestMatchOfMarker_.begin());
+}
+
+bool ModelTracker::hasCopy(std::size_t body) const {
+    for (std::size_t o = 0; o < slots_.size(); ++o)
+        if (o != body && slots_[o].shapeGroup == slots_[body].shapeGroup)
+            return true;
+    return false;
+}
+
+bool ModelTracker::remembers(std::size_t body, double time_s) const {
+    const History& h = history_[body];
+    return h.hasLast && time_s - h.last_s <= config_.identityMemory_s;
+}
+
+bool ModelTracker::nearerCopyWants(std::size_t body, const Vec3& centre_rig_mm,
+                                   double time_s) const {
+    const double own =
+        remembers(body, time_s)
+            ? (history_[body].last.apply(slots_[body].centroid_model_mm) - centre_rig_mm)
+                  .squaredNorm()
+            : std::numeric_limits<double>::infinity();
+    for (std::size_t o = 0; o < slots_.size(); ++o) {
+        if (o == body || slots_[o].shapeGroup != slots_[body].shapeGroup || bodies_[o].found() ||
+            searched_[o] || !remembers(o, time_s))
+            continue;
+        const double theirs =
+            (history_[o].last.apply(slots_[o].centroid_model_mm) - centre_rig_mm).squaredNorm();
+        if (theirs < own)
+            return true;
+    }
+    return false;
+}
+
+} // namespace edgetrack
