@@ -22,6 +22,8 @@ constexpr std::uint64_t kHypothesisCost = 64;
 constexpr int kMaxPasses = 3;
 // Outlying matches dropped at most per pose (a spurious point or two beside hidden markers).
 constexpr int kMaxTrims = 2;
+// Weight of a new frame in a body's typical residual (a time constant of 20 frames).
+constexpr double kRmsSmoothing = 0.05;
 
 std::size_t findRoot(std::vector<std::size_t>& parent, std::size_t i) {
     while (parent[i] != i)
@@ -185,6 +187,10 @@ void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
         h.last = bodies_[b].T_rig_from_model;
         h.last_s = time_s;
         h.hasLast = true;
+        h.typicalRms_mm =
+            h.hasRms ? h.typicalRms_mm + kRmsSmoothing * (bodies_[b].rms_mm - h.typicalRms_mm)
+                     : bodies_[b].rms_mm;
+        h.hasRms = true;
         bodies_[b].lastFound_s = time_s;
     }
 }
@@ -309,7 +315,7 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
                            out.rms_mm);
     out.T_rig_from_model = T_rig_from_model;
     out.markers = static_cast<std::uint32_t>(matches);
-    return out.rms_mm <= config_.maxRms_mm;
+    return out.rms_mm <= rmsGate(body);
 }
 
 std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_from_model,
@@ -318,8 +324,8 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
     const std::span<const Vec3> model = modelMarkers(body);
     // An outlier pulls the fit towards itself, so it is judged against the fit of the others:
     // each match is left out in turn, and the one whose absence fits best is the suspect.
-    for (int trim = 0; trim < kMaxTrims && matches > minMatches && rms_mm > config_.trimAbove_mm;
-         ++trim) {
+    const double suspicious_mm = 0.5 * rmsGate(body);
+    for (int trim = 0; trim < kMaxTrims && matches > minMatches && rms_mm > suspicious_mm; ++trim) {
         double bestRms = rms_mm;
         std::size_t suspect = model.size();
         RigidTransform suspectFit;
@@ -508,7 +514,7 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
         to[i] = points_[clique[i].point];
     }
     const std::optional<RigidFit> fit = fitRigid(from, to);
-    if (!fit || fit->rms_mm > config_.maxRms_mm)
+    if (!fit || fit->rms_mm > rmsGate(body))
         return;
     RigidTransform pose = fit->transform;
     Hypothesis h;
@@ -540,6 +546,14 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
     best = h;
     haveBest = true;
     std::copy_n(matchOfMarker_.begin(), slots_[body].markerCount, bestMatchOfMarker_.begin());
+}
+
+double ModelTracker::rmsGate(std::size_t body) const {
+    const History& h = history_[body];
+    if (!h.hasRms)
+        return config_.maxRms_mm;
+    return std::min(config_.maxRms_mm,
+                    std::max(config_.rmsGateFloor_mm, config_.rmsGateFactor * h.typicalRms_mm));
 }
 
 bool ModelTracker::hasCopy(std::size_t body) const {

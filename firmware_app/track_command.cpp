@@ -77,6 +77,11 @@ Status runTrack(const TrackOptions& options, std::ostream& summary, std::ostream
         progress << "\n";
     if (!source)
         return source.error();
+    std::error_code ec;
+    if (options.out.has_parent_path())
+        std::filesystem::create_directories(options.out.parent_path(), ec);
+    if (ec)
+        return Error{options.out.parent_path().string() + ": cannot create: " + ec.message()};
     if (Status s = recording::writeTextFileAtomically(options.out, csv); !s)
         return s;
 

@@ -54,6 +54,7 @@ struct BodyStats {
     std::size_t wrong = 0;         // found, but far from its truth
     std::vector<double> position_mm;
     std::vector<double> rotation_deg;
+    std::vector<double> fitRms_mm;
 };
 
 double percentile(std::vector<double> values, double share) {
@@ -146,6 +147,9 @@ int main(int argc, char** argv) {
     app.add_option("--calibrate-frames", calibrateFrames, "calibrate on this many frames first");
     app.add_option("--calibrate-seed", calibrateSeed, "seed of the calibration run");
     app.add_option("--write-models", writeModels, "write the calibrated models here");
+    ModelTrackingConfig trackingConfig;
+    app.add_option("--max-rms", trackingConfig.maxRms_mm, "largest accepted fit residual (mm)");
+    app.add_option("--tolerance", trackingConfig.distanceTolerance_mm, "distance tolerance (mm)");
     bool verbose = false;
     app.add_flag("--verbose", verbose, "print every wrong pose");
     app.add_option("--require-found", requireFound, "share of eligible frames found");
@@ -217,7 +221,7 @@ int main(int argc, char** argv) {
         if (fits[b].size() == 1)
             objectOf[b] = static_cast<int>(fits[b][0].object);
 
-    ModelTracker tracker(models, ModelTrackingConfig{});
+    ModelTracker tracker(models, trackingConfig);
     if (!tracker.isValid()) {
         std::fprintf(stderr, "tracker refused the models\n");
         return 2;
@@ -279,8 +283,12 @@ int main(int argc, char** argv) {
             BodyStats& s = stats[b];
             const bool eligible = reconstructed[k] >= models[b].sMin;
             s.eligible += eligible;
-            if (!body.found())
+            if (!body.found()) {
+                if (verbose && eligible)
+                    std::printf("frame %lld body %u missed with %zu markers reconstructed\n",
+                                static_cast<long long>(f), models[b].id, reconstructed[k]);
                 continue;
+            }
             (eligible ? s.foundEligible : s.foundOther) += 1;
             const RigidTransform truth = observation.objectPoses[k] * objectFromModel;
             const double position =
@@ -309,6 +317,7 @@ int main(int argc, char** argv) {
                 continue;
             }
             s.position_mm.push_back(position);
+            s.fitRms_mm.push_back(body.rms_mm);
             s.rotation_deg.push_back(rotation);
         }
     }
@@ -347,6 +356,9 @@ int main(int argc, char** argv) {
         std::printf("  rotation error deg: rms %.3f, median %.3f, 95%% %.3f, 99%% %.3f, max %.3f\n",
                     rotationRms, percentile(s.rotation_deg, 0.5), percentile(s.rotation_deg, 0.95),
                     percentile(s.rotation_deg, 0.99), percentile(s.rotation_deg, 1.0));
+        std::printf("  fit residual (eq. 6) mm: median %.3f, 99%% %.3f, max %.3f\n",
+                    percentile(s.fitRms_mm, 0.5), percentile(s.fitRms_mm, 0.99),
+                    percentile(s.fitRms_mm, 1.0));
         if (objectOf[b] < 0)
             continue; // a model of nothing in the scene (a stray calibration fragment)
         if (requireFound >= 0.0 && foundShare < requireFound) {
