@@ -1,10 +1,14 @@
 // Object calibration on a real Vicon recording: a rigid box among a person's skin markers.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <optional>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
 #include "firmware_app/recording/c3d.hpp"
@@ -90,6 +94,103 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
         RecordProperty("box_rms_mm", std::to_string(a.rms_mm));
     }
     EXPECT_EQ(boxModels, 1);
+}
+
+// Learn on one half, track the box through the other half with every model learnt. The issue asks
+// for first half -> second half; after the first 2.9 s the calibrator holds no established box
+// (docs/model-tracking.md, "Real data"), so the halves are taken the other way round.
+TEST(TrackingRealData, ViconBoxLearntOnTheSecondHalfTrackedThroughTheFirst) {
+    if (!std::filesystem::exists(kVicon))
+        GTEST_SKIP() << kVicon << " is absent (the shared real-data folder is not here)";
+    const Result<recording::C3dPoints> c3d = recording::readC3d(kVicon);
+    ASSERT_TRUE(c3d) << c3d.error().message;
+    std::vector<std::size_t> box;
+    for (std::size_t p = 0; p < c3d->pointCount; ++p)
+        if (c3d->labels[p].rfind("boite:", 0) == 0)
+            box.push_back(p);
+    ASSERT_EQ(box.size(), 8u);
+    const std::vector<Vec3> layout = labelledBox(*c3d, box);
+    const std::size_t half = c3d->frameCount / 2;
+
+    auto framePoints = [&](std::size_t f, std::vector<Vec3>& points) {
+        points.clear();
+        for (std::size_t p = 0; p < c3d->pointCount; ++p)
+            if (c3d->isValid(f, p))
+                points.push_back(c3d->position(f, p));
+    };
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<Vec3> points;
+    for (std::size_t f = half; f < c3d->frameCount; ++f) {
+        framePoints(f, points);
+        calibrator.update(static_cast<double>(f) / c3d->frameRate_hz, points);
+    }
+    std::vector<MarkerModel> models;
+    for (std::size_t i = 0; i < config.maxObjects; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    models.resize(calibrator.exportModels(models));
+    std::size_t boxModel = models.size();
+    test::ModelAlignment alignment;
+    for (std::size_t i = 0; i < models.size(); ++i) {
+        test::ModelAlignment a = test::alignModel(models[i], layout, 1.0);
+        if (a.matched >= 4 && a.matched > alignment.matched) {
+            alignment = std::move(a);
+            boxModel = i;
+        }
+    }
+    ASSERT_LT(boxModel, models.size()) << "the second half gave no model of the box";
+
+    ModelTracker tracker(models, ModelTrackingConfig{});
+    ASSERT_TRUE(tracker.isValid());
+    std::size_t eligible = 0, hits = 0, hitsEligible = 0;
+    double sumSquares = 0.0, worst = 0.0;
+    std::size_t residuals = 0, far = 0;
+    for (std::size_t f = 0; f < half; ++f) {
+        framePoints(f, points);
+        tracker.update(static_cast<double>(f) / c3d->frameRate_hz, points);
+        std::size_t seen = 0;
+        for (std::size_t p : box)
+            seen += c3d->isValid(f, p) ? 1U : 0U;
+        const bool isEligible = seen >= models[boxModel].sMin;
+        eligible += isEligible;
+        const TrackedBody& body = tracker.bodies()[boxModel];
+        if (!body.found())
+            continue;
+        ++hits;
+        hitsEligible += isEligible;
+        // Residual of each labelled marker against the model marker the pose puts there.
+        for (std::size_t m = 0; m < models[boxModel].markers_model_mm.size(); ++m) {
+            if (alignment.layoutMarkerOf[m] < 0)
+                continue;
+            const std::size_t point = box[static_cast<std::size_t>(alignment.layoutMarkerOf[m])];
+            if (!c3d->isValid(f, point))
+                continue;
+            const double r = (body.T_rig_from_model.apply(models[boxModel].markers_model_mm[m]) -
+                              c3d->position(f, point))
+                                 .norm();
+            sumSquares += r * r;
+            worst = std::max(worst, r);
+            far += r > 2.0 ? 1U : 0U;
+            ++residuals;
+        }
+    }
+    const double rms =
+        std::sqrt(sumSquares / static_cast<double>(std::max<std::size_t>(residuals, 1)));
+    RecordProperty("box_hits", std::to_string(hits));
+    RecordProperty("box_eligible", std::to_string(eligible));
+    RecordProperty("box_residual_rms_mm", std::to_string(rms));
+    std::printf(
+        "box: model %zu of %zu (%zu markers, s_min %u); first half %zu frames: found in %zu,"
+        " %zu of %zu with >= s_min labelled markers; residual rms %.3f mm, max %.3f mm, %zu of %zu "
+        "above 2 mm\n",
+        boxModel, models.size(), models[boxModel].markers_model_mm.size(), models[boxModel].sMin,
+        half, hits, hitsEligible, eligible, rms, worst, far, residuals);
+    EXPECT_GE(static_cast<double>(hitsEligible), 0.99 * static_cast<double>(eligible));
+    EXPECT_LT(rms, 1.0);
+    // Around frames 206-220 the labelled markers themselves are not rigid (fitted onto the box's
+    // layout they are off by up to 3 mm), so a few residuals are large however good the pose.
+    EXPECT_LE(static_cast<double>(far), 0.01 * static_cast<double>(residuals))
+        << far << " of " << residuals << " residuals above 2 mm";
 }
 
 } // namespace
