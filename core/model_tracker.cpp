@@ -73,6 +73,10 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
             adjacency_[slot.firstMarker + e.to].insert(e.from);
             longest = std::max(longest, e.distance_mm);
         }
+        slot.firstDistance = modelDistance_mm_.size();
+        for (const Vec3& a : m.markers_model_mm)
+            for (const Vec3& b : m.markers_model_mm)
+                modelDistance_mm_.push_back(static_cast<float>((a - b).norm()));
         slot.firstBin = binCounts.size();
         slot.binCount = static_cast<std::size_t>(longest / binWidth) + 2;
         binCounts.resize(slot.firstBin + slot.binCount, 0);
@@ -123,6 +127,7 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     candidateCount_.assign(maxModelMarkers_, 0);
     candidates_.resize(maxModelMarkers_ * config.maxCandidatesPerMarker);
     agreement_.assign(config.maxCandidatesPerMarker, 0);
+    pointDistance_mm_.assign(config.maxPoints * config.maxPoints, 0.0F);
     matchOfMarker_.assign(maxModelMarkers_, -1);
     bestMatchOfMarker_.assign(maxModelMarkers_, -1);
     fittedMatch_.assign(maxModelMarkers_, -1);
@@ -149,6 +154,7 @@ void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
     points_ = points_rig_mm.first(pointCount_);
     std::fill_n(pointOwner_.begin(), pointCount_, std::int16_t{-1});
     std::fill(searched_.begin(), searched_.end(), std::uint8_t{0});
+    pointDistancesReady_ = false;
 
     for (std::size_t b = 0; b < bodies_.size(); ++b) {
         bodies_[b].source = PoseSource::None;
@@ -375,6 +381,18 @@ void ModelTracker::search(std::size_t body, double time_s) {
     if (freePoints < slots_[body].sMin)
         return;
     ++counters_.searches;
+    if (!pointDistancesReady_) {
+        // Every search of the frame looks up the same pairs; their distances are computed once.
+        for (std::size_t i = 0; i < pointCount_; ++i) {
+            pointDistance_mm_[i * pointCount_ + i] = 0.0F;
+            for (std::size_t j = i + 1; j < pointCount_; ++j) {
+                const auto d = static_cast<float>((points_[i] - points_[j]).norm());
+                pointDistance_mm_[i * pointCount_ + j] = d;
+                pointDistance_mm_[j * pointCount_ + i] = d;
+            }
+        }
+        pointDistancesReady_ = true;
+    }
     std::fill_n(explained_.begin(), pointCount_, std::uint8_t{0});
     Hypothesis best;
     bool haveBest = false;
@@ -421,7 +439,7 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
         if (q == p || pointOwner_[q] >= 0)
             continue;
         ++frameChecks_;
-        const double d = (points_[q] - points_[p]).norm();
+        const double d = pointDistance(p, q);
         const auto bin = static_cast<std::size_t>(d / tolerance);
         const std::size_t firstBin = bin > 0 ? bin - 1 : 0;
         const std::size_t lastBin = std::min(bin + 1, slot.binCount - 1);
@@ -439,12 +457,14 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
 
     // Two candidates of one marker V (p's possible identity) agree when they are different
     // points and markers, co-visible, and as far apart as their markers.
+    const float* modelDistance = &modelDistance_mm_[slot.firstDistance];
+    const auto toleranceF = static_cast<float>(tolerance);
     auto agree = [&](const Candidate& x, const Candidate& y) {
         ++frameChecks_;
         return x.point != y.point && x.marker != y.marker &&
                adjacency(body, x.marker).contains(y.marker) &&
-               std::abs((points_[x.point] - points_[y.point]).norm() -
-                        (model[x.marker] - model[y.marker]).norm()) <= tolerance;
+               std::abs(pointDistance_mm_[x.point * pointCount_ + y.point] -
+                        modelDistance[x.marker * slot.markerCount + y.marker]) <= toleranceF;
     };
 
     // A body found with m markers, p among them as marker v, shows m - 1 candidates of v that

@@ -18,10 +18,11 @@ namespace edgetrack {
 /// \brief Thresholds and capacities of model-based tracking; defaults suit the simulated rig.
 struct ModelTrackingConfig {
     /// A data distance and a model edge agree within this (mm); also the hashtable's bin width.
-    /// The paper used 4 mm; our 3D noise is a tenth of a millimetre, and the same 2 mm is the
-    /// tolerance S_min was computed with (SminConfig), so a model's S_min holds for this tracker.
-    double distanceTolerance_mm = 2.0;
-    /// A data point this close to a model marker placed by a pose is that marker (mm).
+    /// The paper used 4 mm; the simulated rig's distances are good to 0.1 mm, and each halving of
+    /// the tolerance halves the candidates of a search (a quarter of its pair checks). Models
+    /// from `calibrate` carry an S_min found at 2 mm, which stays safe at any smaller tolerance.
+    double distanceTolerance_mm =
+        1.0; /// A data point this close to a model marker placed by a pose is that marker (mm).
     double matchRadius_mm = 2.0;
     /// When a pose's residual exceeds half its residual gate (below), the match that lies
     /// outlierFactor times the RMS of the others (and at least outlierFloor_mm) away from their
@@ -158,6 +159,7 @@ private:
     struct ModelSlot {
         std::size_t firstMarker = 0;
         std::size_t markerCount = 0;
+        std::size_t firstDistance = 0;
         std::size_t firstBin = 0;
         std::size_t binCount = 0;
         std::uint32_t sMin = 4;
@@ -234,6 +236,8 @@ private:
     std::vector<ModelSlot> slots_;
     std::vector<Vec3> markers_model_mm_;
     std::vector<MarkerSet> adjacency_;
+    /// Each model's marker-to-marker distances (mm), markerCount x markerCount from firstDistance.
+    std::vector<float> modelDistance_mm_;
     /// CSR hashtable: bins of all models one after another; binStart_[firstBin + b]..[+ b + 1).
     std::vector<std::uint32_t> binStart_;
     std::vector<HashEntry> entries_;
@@ -251,6 +255,13 @@ private:
     std::vector<std::uint16_t> nearby_;
     std::vector<std::uint32_t> candidateCount_;
     std::vector<Candidate> candidates_;
+    /// Distances between the frame's points (mm), pointCount_ x pointCount_, computed at the
+    /// frame's first search.
+    std::vector<float> pointDistance_mm_;
+    bool pointDistancesReady_ = false;
+    double pointDistance(std::size_t a, std::size_t b) const {
+        return static_cast<double>(pointDistance_mm_[a * pointCount_ + b]);
+    }
     /// Bit b of agreement_[a]: candidates a and b of the marker under study agree.
     std::vector<std::uint64_t> agreement_;
     std::vector<std::int32_t> matchOfMarker_;
