@@ -129,6 +129,73 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
 
 } // namespace
 
+bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config) {
+    const std::size_t smaller = std::min(a.markers_model_mm.size(), b.markers_model_mm.size());
+    const std::size_t larger = std::max(a.markers_model_mm.size(), b.markers_model_mm.size());
+    if (smaller < 3 ||
+        static_cast<double>(smaller) < config.sameShapeShare * static_cast<double>(larger))
+        return false;
+    Adjacency adjA, adjB;
+    buildAdjacency(a, adjA);
+    buildAdjacency(b, adjB);
+    const double tol = config.tolerance_mm;
+    const auto& pa = a.markers_model_mm;
+    const auto& pb = b.markers_model_mm;
+    // Copies share almost every triangle, so a few of a's widest ones are enough to find the
+    // transform between them; a full congruence search (computeSmin) is far dearer.
+    constexpr std::size_t kTriangles = 8;
+    struct Triangle {
+        std::size_t i, j, k;
+        double twiceArea;
+    };
+    FixedVector<Triangle, kTriangles> widest;
+    for (std::size_t i = 0; i < adjA.size(); ++i)
+        adjA[i].forEach([&](std::size_t j) {
+            if (j <= i)
+                return;
+            (adjA[i] & adjA[j]).forEach([&](std::size_t k) {
+                if (k <= j)
+                    return;
+                const Triangle t{i, j, k, (pa[j] - pa[i]).cross(pa[k] - pa[i]).norm()};
+                if (!widest.full()) {
+                    widest.push_back(t);
+                    return;
+                }
+                auto smallest = std::min_element(
+                    widest.begin(), widest.end(),
+                    [](const Triangle& x, const Triangle& y) { return x.twiceArea < y.twiceArea; });
+                if (smallest->twiceArea < t.twiceArea)
+                    *smallest = t;
+            });
+        });
+    const double needed = config.sameShapeShare * static_cast<double>(smaller);
+    for (const Triangle& t : widest) {
+        const double dij = (pa[t.i] - pa[t.j]).norm();
+        const double dik = (pa[t.i] - pa[t.k]).norm();
+        const double djk = (pa[t.j] - pa[t.k]).norm();
+        for (std::size_t x = 0; x < adjB.size(); ++x) {
+            bool found = false;
+            adjB[x].forEach([&](std::size_t y) {
+                if (found || std::abs((pb[x] - pb[y]).norm() - dij) > tol)
+                    return;
+                (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
+                    if (found || std::abs((pb[x] - pb[z]).norm() - dik) > tol ||
+                        std::abs((pb[y] - pb[z]).norm() - djk) > tol)
+                        return;
+                    const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
+                    const Vec3 to[3] = {pb[x], pb[y], pb[z]};
+                    const std::optional<RigidFit> fit = fitRigid(from, to);
+                    found = fit && static_cast<double>(
+                                       countCongruent(a, b, fit->transform, tol * tol)) >= needed;
+                });
+            });
+            if (found)
+                return true;
+        }
+    }
+    return false;
+}
+
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {
     // Largest ambiguous set per model, kept in sMin until the end.
     for (MarkerModel& m : models) {

@@ -76,6 +76,14 @@ struct SminConfig {
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config);
 
 /**
+ * \brief Whether \a a and \a b are copies of one layout: a rigid transform puts at least
+ * config.sameShapeShare of the smaller one's markers onto markers of the other (within
+ * config.tolerance_mm). Tried from a's widest co-visible triangles, so it is cheap enough for
+ * start-up; computeSmin finds the same relation as part of its fuller analysis.
+ */
+bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config);
+
+/**
  * \brief The canonical frame of a marker layout: origin at the centroid, axes along the principal
  * axes by decreasing spread, signs fixed by the third moments (so a layout gets the same frame
  * whatever frame it was measured in, unless its spread is isotropic).

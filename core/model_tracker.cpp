@@ -86,18 +86,13 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     }
 
     // Copies of one layout are found from the models themselves: model files do not say it.
-    std::vector<MarkerModel> analysed;
-    for (const MarkerModel& m : models) {
-        analysed.emplace_back(m.markers_model_mm.size());
-        analysed.back().assign(m);
-    }
-    computeSmin(analysed, SminConfig{config.distanceTolerance_mm, 0.8, 4});
     std::vector<std::size_t> parent(models.size());
     std::iota(parent.begin(), parent.end(), std::size_t{0});
-    for (std::size_t i = 0; i < analysed.size(); ++i)
-        if (analysed[i].sameShapeAs >= 0)
-            parent[findRoot(parent, i)] =
-                findRoot(parent, static_cast<std::size_t>(analysed[i].sameShapeAs));
+    const SminConfig copies{2.0 * config.distanceTolerance_mm, 0.8, 4};
+    for (std::size_t i = 0; i < models.size(); ++i)
+        for (std::size_t j = i + 1; j < models.size(); ++j)
+            if (sameShape(models[i], models[j], copies))
+                parent[findRoot(parent, i)] = findRoot(parent, j);
     for (std::size_t i = 0; i < slots_.size(); ++i)
         slots_[i].shapeGroup = findRoot(parent, i);
 

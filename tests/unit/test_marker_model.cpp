@@ -76,6 +76,28 @@ TEST(Smin, PartialSymmetryRaisesSminAboveTheSymmetricPart) {
     EXPECT_EQ(model.sMin, 5u);
 }
 
+TEST(SameShape, FindsCopiesMeasuredInOtherFramesAndWithMissingMarkers) {
+    const std::vector<Vec3> layout = irregularLayout(20, 21);
+    RigidTransform motion;
+    motion.rotation = quaternionFromWxyz(0.2, 0.9, -0.3, 0.4);
+    motion.translation_mm = Vec3(5.0, 70.0, -30.0);
+    std::vector<Vec3> copy;
+    // The copy was calibrated elsewhere: moved, a tenth of a millimetre off, and two markers
+    // were never seen.
+    std::mt19937 random(22);
+    std::normal_distribution<double> noise(0.0, 0.1);
+    for (std::size_t i = 2; i < layout.size(); ++i)
+        copy.push_back(motion.apply(layout[i]) + Vec3(noise(random), noise(random), noise(random)));
+    const SminConfig config;
+    EXPECT_TRUE(sameShape(fullyConnected(layout), fullyConnected(copy), config));
+    EXPECT_TRUE(sameShape(fullyConnected(copy), fullyConnected(layout), config));
+    EXPECT_FALSE(
+        sameShape(fullyConnected(layout), fullyConnected(irregularLayout(20, 23)), config));
+    // Half a model is not a copy of it.
+    const std::vector<Vec3> half(layout.begin(), layout.begin() + 10);
+    EXPECT_FALSE(sameShape(fullyConnected(layout), fullyConnected(half), config));
+}
+
 TEST(Smin, IdenticalModelsAreMarkedAsTheSameShape) {
     const std::vector<Vec3> layout = irregularLayout(9, 11);
     std::vector<MarkerModel> models;
