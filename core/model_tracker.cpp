@@ -224,13 +224,32 @@ bool ModelTracker::confirmPrediction(std::size_t body, const RigidTransform& pre
     RigidTransform pose = predicted;
     if (!refine(body, pose, config_.predictionRadius_mm, config_.minTrackedMarkers, h))
         return false;
+    accept(body, PoseSource::Predicted, h);
+    return true;
+}
+
+void ModelTracker::accept(std::size_t body, PoseSource source, const Hypothesis& h) {
     TrackedBody& out = bodies_[body];
-    out.source = PoseSource::Predicted;
+    out.source = source;
     out.T_rig_from_model = h.T_rig_from_model;
     out.markers = h.markers;
     out.rms_mm = h.rms_mm;
-    claim(body);
-    return true;
+    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
+        if (matchOfMarker_[i] >= 0)
+            pointOwner_[static_cast<std::size_t>(matchOfMarker_[i])] =
+                static_cast<std::int16_t>(body);
+}
+
+std::optional<RigidFit> ModelTracker::fitMatches(std::size_t body, std::size_t leftOut) {
+    const std::span<const Vec3> model = modelMarkers(body);
+    fitFrom_.clear();
+    fitTo_.clear();
+    for (std::size_t i = 0; i < model.size(); ++i)
+        if (i != leftOut && matchOfMarker_[i] >= 0) {
+            fitFrom_.push_back(model[i]);
+            fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
+        }
+    return fitRigid(fitFrom_.span(), fitTo_.span());
 }
 
 std::size_t ModelTracker::matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
@@ -294,14 +313,7 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
                                  matchOfMarker_.begin() + static_cast<std::ptrdiff_t>(model.size()),
                                  fittedMatch_.begin()))
             break;
-        fitFrom_.clear();
-        fitTo_.clear();
-        for (std::size_t i = 0; i < model.size(); ++i)
-            if (matchOfMarker_[i] >= 0) {
-                fitFrom_.push_back(model[i]);
-                fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
-            }
-        const std::optional<RigidFit> fit = fitRigid(fitFrom_.span(), fitTo_.span());
+        const std::optional<RigidFit> fit = fitMatches(body);
         if (!fit)
             return false;
         T_rig_from_model = fit->transform;
@@ -333,14 +345,7 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
         for (std::size_t left = 0; left < model.size(); ++left) {
             if (matchOfMarker_[left] < 0)
                 continue;
-            fitFrom_.clear();
-            fitTo_.clear();
-            for (std::size_t i = 0; i < model.size(); ++i)
-                if (i != left && matchOfMarker_[i] >= 0) {
-                    fitFrom_.push_back(model[i]);
-                    fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
-                }
-            const std::optional<RigidFit> fit = fitRigid(fitFrom_.span(), fitTo_.span());
+            const std::optional<RigidFit> fit = fitMatches(body, left);
             if (fit && fit->rms_mm < bestRms) {
                 bestRms = fit->rms_mm;
                 suspect = left;
@@ -360,13 +365,6 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
         rms_mm = bestRms;
     }
     return matches;
-}
-
-void ModelTracker::claim(std::size_t body) {
-    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
-        if (matchOfMarker_[i] >= 0)
-            pointOwner_[static_cast<std::size_t>(matchOfMarker_[i])] =
-                static_cast<std::int16_t>(body);
 }
 
 void ModelTracker::search(std::size_t body, double time_s) {
@@ -404,12 +402,7 @@ void ModelTracker::search(std::size_t body, double time_s) {
         return;
     ++counters_.searchHits;
     std::copy_n(bestMatchOfMarker_.begin(), slots_[body].markerCount, matchOfMarker_.begin());
-    TrackedBody& out = bodies_[body];
-    out.source = PoseSource::Searched;
-    out.T_rig_from_model = best.T_rig_from_model;
-    out.markers = best.markers;
-    out.rms_mm = best.rms_mm;
-    claim(body);
+    accept(body, PoseSource::Searched, best);
 }
 
 void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,

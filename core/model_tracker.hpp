@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -11,6 +12,7 @@
 #include "core/geometry.hpp"
 #include "core/marker_model.hpp"
 #include "core/marker_set.hpp"
+#include "core/rigid_fit.hpp"
 #include "core/rigid_transform.hpp"
 
 namespace edgetrack {
@@ -226,7 +228,11 @@ private:
     double rmsGate(std::size_t body) const;
     /// Whether \a body was found recently enough to keep its identity by position.
     bool remembers(std::size_t body, double time_s) const;
-    void claim(std::size_t body);
+    /// Publish \a h as \a body's pose and give it the points of matchOfMarker_.
+    void accept(std::size_t body, PoseSource source, const Hypothesis& h);
+    /// Least-squares fit of the model markers to their matches (matchOfMarker_), \a leftOut
+    /// excepted.
+    std::optional<RigidFit> fitMatches(std::size_t body, std::size_t leftOut = SIZE_MAX);
     bool budgetLeft() const { return frameChecks_ < config_.searchBudget; }
 
     ModelTrackingConfig config_;

@@ -148,7 +148,7 @@ int main(int argc, char** argv) {
         return 2;
     }
     const sim::World world(std::move(*scene), seed);
-    test::SimImagePipeline pipeline(world, seed, StereoConfig{});
+    test::SimFrames simFrames(world, seed, level == "images");
     ObjectCalibrator calibrator(config);
     std::vector<MarkerModel> models;
     for (std::size_t i = 0; i < config.maxObjects; ++i)
@@ -166,18 +166,11 @@ int main(int argc, char** argv) {
     std::vector<Vec3> points;
     sim::Observation observation;
     std::vector<int> visible;
-    sim::Random random(seed ^ 0x5eedU);
-    const sim::LevelNoise noise;
     const auto perSecond = static_cast<std::int64_t>(world.scene().frameRate_hz);
     std::vector<std::pair<double, std::vector<MarkerModel>>> checkpoints;
 
     for (std::int64_t f = 0; f < frames; ++f) {
-        const auto frame = static_cast<std::uint64_t>(f);
-        world.observe(frame, observation);
-        if (level == "images")
-            pipeline.run(observation, frame, false, points);
-        else
-            sim::pointsFromObservation(observation, noise, random, points);
+        simFrames.next(static_cast<std::uint64_t>(f), observation, points);
         calibrator.update(observation.time_s, points);
         sim::separatelyVisible(observation, visible);
         for (const int source : visible)

@@ -80,20 +80,13 @@ double rms(const std::vector<double>& values) {
 std::vector<MarkerModel> calibrate(const std::string& sceneName, std::uint64_t seed,
                                    std::int64_t frames, const std::string& level) {
     const sim::World world(*sim::makeScene(sceneName, seed), seed);
-    test::SimImagePipeline pipeline(world, seed, StereoConfig{});
+    test::SimFrames source(world, seed, level == "images");
     const CalibrationConfig config;
     ObjectCalibrator calibrator(config);
     std::vector<Vec3> points;
     sim::Observation observation;
-    sim::Random random(seed ^ 0x5eedU);
-    const sim::LevelNoise noise;
     for (std::int64_t f = 0; f < frames; ++f) {
-        const auto frame = static_cast<std::uint64_t>(f);
-        world.observe(frame, observation);
-        if (level == "images")
-            pipeline.run(observation, frame, false, points);
-        else
-            sim::pointsFromObservation(observation, noise, random, points);
+        source.next(static_cast<std::uint64_t>(f), observation, points);
         calibrator.update(observation.time_s, points);
     }
     std::vector<MarkerModel> models;
@@ -211,23 +204,16 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "tracker refused the models\n");
         return 2;
     }
-    test::SimImagePipeline pipeline(world, seed, StereoConfig{});
+    test::SimFrames source(world, seed, level == "images");
     std::vector<BodyStats> stats(models.size());
     std::vector<Vec3> points;
     std::vector<int> visible;
     std::vector<std::size_t> reconstructed(layouts.size());
     sim::Observation observation;
-    sim::Random random(seed ^ 0x7eadU);
-    const sim::LevelNoise noise;
     std::vector<double> frameTimes_us;
 
     for (std::int64_t f = 0; f < frames; ++f) {
-        const auto frame = static_cast<std::uint64_t>(f);
-        world.observe(frame, observation);
-        if (level == "images")
-            pipeline.run(observation, frame, false, points);
-        else
-            sim::pointsFromObservation(observation, noise, random, points);
+        source.next(static_cast<std::uint64_t>(f), observation, points);
         if (cold)
             tracker.reset();
         const auto start = std::chrono::steady_clock::now();

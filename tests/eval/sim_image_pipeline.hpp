@@ -6,6 +6,7 @@
 
 #include "core/blob_detector.hpp"
 #include "core/stereo_matcher.hpp"
+#include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
 
 namespace edgetrack::test {
@@ -65,6 +66,35 @@ private:
     std::vector<std::uint8_t> images_[2];
     BoundedVector<Blob> blobs_[2];
     BoundedVector<StereoMarker> markers_;
+};
+
+/**
+ * \brief Each frame of a simulated world as the pipeline's 3D points: at images level through
+ * SimImagePipeline (SVD stereo), at points level the simulator's points with their noise.
+ */
+class SimFrames {
+public:
+    SimFrames(const sim::World& world, std::uint64_t seed, bool images)
+        : world_(world)
+        , images_(images)
+        , pipeline_(world, seed, StereoConfig{})
+        , random_(seed ^ 0x5eedU) {}
+
+    /// \brief Observe frame \a frame into \a observation and its points (rig frame, mm).
+    void next(std::uint64_t frame, sim::Observation& observation, std::vector<Vec3>& points) {
+        world_.observe(frame, observation);
+        if (images_)
+            pipeline_.run(observation, frame, false, points);
+        else
+            sim::pointsFromObservation(observation, noise_, random_, points);
+    }
+
+private:
+    const sim::World& world_;
+    bool images_;
+    SimImagePipeline pipeline_;
+    sim::Random random_;
+    sim::LevelNoise noise_;
 };
 
 } // namespace edgetrack::test

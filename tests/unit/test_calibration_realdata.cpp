@@ -20,6 +20,23 @@ namespace {
 const std::filesystem::path kVicon =
     std::filesystem::path(EDGETRACK_REALDATA_DIR) / "ezc3d-testFiles" / "Vicon.c3d";
 
+// The C3D points labelled as the box's markers.
+std::vector<std::size_t> boxPoints(const recording::C3dPoints& c3d) {
+    std::vector<std::size_t> box;
+    for (std::size_t p = 0; p < c3d.pointCount; ++p)
+        if (c3d.labels[p].rfind("boite:", 0) == 0)
+            box.push_back(p);
+    return box;
+}
+
+// The frame's valid points (mm), labels ignored.
+void framePoints(const recording::C3dPoints& c3d, std::size_t frame, std::vector<Vec3>& points) {
+    points.clear();
+    for (std::size_t p = 0; p < c3d.pointCount; ++p)
+        if (c3d.isValid(frame, p))
+            points.push_back(c3d.position(frame, p));
+}
+
 // The box's labelled layout: every frame with all eight markers fitted onto the first such frame,
 // and averaged (mm, in that frame's coordinates).
 std::vector<Vec3> labelledBox(const recording::C3dPoints& c3d,
@@ -52,10 +69,7 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
         GTEST_SKIP() << kVicon << " is absent (the shared real-data folder is not here)";
     const Result<recording::C3dPoints> c3d = recording::readC3d(kVicon);
     ASSERT_TRUE(c3d) << c3d.error().message;
-    std::vector<std::size_t> box;
-    for (std::size_t p = 0; p < c3d->pointCount; ++p)
-        if (c3d->labels[p].rfind("boite:", 0) == 0)
-            box.push_back(p);
+    const std::vector<std::size_t> box = boxPoints(*c3d);
     ASSERT_EQ(box.size(), 8u);
     const std::vector<Vec3> layout = labelledBox(*c3d, box);
 
@@ -63,10 +77,7 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
     ObjectCalibrator calibrator(config);
     std::vector<Vec3> points;
     for (std::size_t f = 0; f < c3d->frameCount; ++f) {
-        points.clear();
-        for (std::size_t p = 0; p < c3d->pointCount; ++p)
-            if (c3d->isValid(f, p))
-                points.push_back(c3d->position(f, p));
+        framePoints(*c3d, f, points);
         calibrator.update(static_cast<double>(f) / c3d->frameRate_hz, points);
     }
     std::vector<MarkerModel> models;
@@ -104,25 +115,16 @@ TEST(TrackingRealData, ViconBoxLearntOnTheSecondHalfTrackedThroughTheFirst) {
         GTEST_SKIP() << kVicon << " is absent (the shared real-data folder is not here)";
     const Result<recording::C3dPoints> c3d = recording::readC3d(kVicon);
     ASSERT_TRUE(c3d) << c3d.error().message;
-    std::vector<std::size_t> box;
-    for (std::size_t p = 0; p < c3d->pointCount; ++p)
-        if (c3d->labels[p].rfind("boite:", 0) == 0)
-            box.push_back(p);
+    const std::vector<std::size_t> box = boxPoints(*c3d);
     ASSERT_EQ(box.size(), 8u);
     const std::vector<Vec3> layout = labelledBox(*c3d, box);
     const std::size_t half = c3d->frameCount / 2;
 
-    auto framePoints = [&](std::size_t f, std::vector<Vec3>& points) {
-        points.clear();
-        for (std::size_t p = 0; p < c3d->pointCount; ++p)
-            if (c3d->isValid(f, p))
-                points.push_back(c3d->position(f, p));
-    };
     CalibrationConfig config;
     ObjectCalibrator calibrator(config);
     std::vector<Vec3> points;
     for (std::size_t f = half; f < c3d->frameCount; ++f) {
-        framePoints(f, points);
+        framePoints(*c3d, f, points);
         calibrator.update(static_cast<double>(f) / c3d->frameRate_hz, points);
     }
     std::vector<MarkerModel> models;
@@ -146,7 +148,7 @@ TEST(TrackingRealData, ViconBoxLearntOnTheSecondHalfTrackedThroughTheFirst) {
     double sumSquares = 0.0, worst = 0.0;
     std::size_t residuals = 0, far = 0;
     for (std::size_t f = 0; f < half; ++f) {
-        framePoints(f, points);
+        framePoints(*c3d, f, points);
         tracker.update(static_cast<double>(f) / c3d->frameRate_hz, points);
         std::size_t seen = 0;
         for (std::size_t p : box)
