@@ -1,0 +1,56 @@
+// A.R.T. DTrack ASCII frames (INTERFACES §6): the UDP output existing DTrack clients read as is.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string_view>
+#include <vector>
+
+#include "core/geometry.hpp"
+#include "core/result.hpp"
+#include "core/rigid_transform.hpp"
+
+namespace edgetrack::app {
+
+/// \brief One body in a DTrack `6d` line.
+struct DtrackBody {
+    std::uint32_t id = 0;
+    /// DTrack's quality, 0 to 1.
+    double quality = 1.0;
+    /// Model to rig (mm).
+    RigidTransform T_rig_from_model;
+};
+
+/// \brief Everything one DTrack datagram says.
+struct DtrackFrame {
+    std::uint64_t frame = 0;
+    /// Seconds since UTC midnight, at mid-exposure.
+    double timestamp_s = 0.0;
+    /// Number of calibrated bodies (`6dcal`).
+    std::uint32_t calibrated = 0;
+    std::span<const DtrackBody> bodies;
+};
+
+/**
+ * \brief Write \a frame as one DTrack ASCII datagram into \a out, CRLF line ends:
+ * `fr`, `ts`, `6dcal`, and `6d N [id q][x y z][r0 ... r8]` with the rotation column-wise and
+ * positions in mm (`6d 0` when no body is found).
+ * \return the datagram's length, or 0 when it does not fit \a out (nothing partial is sent).
+ * Allocates nothing: it runs in the frame loop.
+ */
+std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out);
+
+/// \brief A parsed datagram (for tests and tools; allocates).
+struct ParsedDtrack {
+    std::uint64_t frame = 0;
+    double timestamp_s = 0.0;
+    std::uint32_t calibrated = 0;
+    std::vector<DtrackBody> bodies;
+};
+
+/// \brief Parse a datagram as a DTrack client does: the lines above, CRLF ends, unknown lines
+/// skipped; a rotation that is not orthonormal (to 1e-4) is an error.
+Result<ParsedDtrack> parseDtrack(std::string_view datagram);
+
+} // namespace edgetrack::app

@@ -1,0 +1,90 @@
+// Tests of the DTrack ASCII output: the layout DTrack clients expect, and a round trip.
+#include <array>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "firmware_app/output/dtrack.hpp"
+#include "tests/support/alloc_guard.hpp"
+
+namespace edgetrack::app {
+namespace {
+
+TEST(Dtrack, WritesTheLinesDtrackClientsRead) {
+    std::array<DtrackBody, 1> bodies{};
+    bodies[0].id = 3;
+    // A quarter turn about z: the first column of R is (0, 1, 0).
+    bodies[0].T_rig_from_model.rotation = Quat(Eigen::AngleAxisd(M_PI / 2.0, Vec3::UnitZ()));
+    bodies[0].T_rig_from_model.translation_mm = Vec3(10.5, -20.25, 600.0);
+    std::array<char, 512> buffer{};
+    const std::size_t length = formatDtrack(DtrackFrame{42, 3600.5, 2, bodies}, buffer);
+    ASSERT_GT(length, 0u);
+    EXPECT_EQ(std::string(buffer.data(), length),
+              "fr 42\r\nts 3600.500000\r\n6dcal 2\r\n6d 1 [3 1.000][10.500 -20.250 600.000]"
+              "[0.000000 1.000000 0.000000 -1.000000 0.000000 0.000000 0.000000 0.000000 "
+              "1.000000]\r\n");
+}
+
+TEST(Dtrack, SaysSixDZeroWhenNothingIsTracked) {
+    std::array<char, 128> buffer{};
+    const std::size_t length = formatDtrack(DtrackFrame{7, 1.0, 2, {}}, buffer);
+    EXPECT_NE(std::string(buffer.data(), length).find("\r\n6d 0\r\n"), std::string::npos);
+}
+
+TEST(Dtrack, ReadsBackWhatItWrites) {
+    std::array<DtrackBody, 2> bodies{};
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+        bodies[i].id = static_cast<std::uint32_t>(i);
+        bodies[i].quality = 0.5 + 0.25 * static_cast<double>(i);
+        bodies[i].T_rig_from_model.rotation =
+            quaternionFromWxyz(0.3, -0.5 + static_cast<double>(i), 0.7, 0.1);
+        bodies[i].T_rig_from_model.translation_mm = Vec3(-100.0 * static_cast<double>(i), 5, 700);
+    }
+    std::array<char, 1024> buffer{};
+    const std::size_t length = formatDtrack(DtrackFrame{123456, 86399.25, 2, bodies}, buffer);
+    const Result<ParsedDtrack> parsed = parseDtrack(std::string_view(buffer.data(), length));
+    ASSERT_TRUE(parsed) << parsed.error().message;
+    EXPECT_EQ(parsed->frame, 123456u);
+    EXPECT_DOUBLE_EQ(parsed->timestamp_s, 86399.25);
+    EXPECT_EQ(parsed->calibrated, 2u);
+    ASSERT_EQ(parsed->bodies.size(), 2u);
+    for (std::size_t i = 0; i < bodies.size(); ++i) {
+        EXPECT_EQ(parsed->bodies[i].id, bodies[i].id);
+        EXPECT_NEAR(parsed->bodies[i].quality, bodies[i].quality, 1e-3);
+        EXPECT_LT((parsed->bodies[i].T_rig_from_model.translation_mm -
+                   bodies[i].T_rig_from_model.translation_mm)
+                      .norm(),
+                  1e-3);
+        EXPECT_LT(rotationAngleBetween_rad(parsed->bodies[i].T_rig_from_model.rotation,
+                                           bodies[i].T_rig_from_model.rotation),
+                  1e-5);
+    }
+}
+
+TEST(Dtrack, SendsNothingPartialWhenTheBufferIsShort) {
+    std::array<DtrackBody, 4> bodies{};
+    std::array<char, 200> buffer{};
+    EXPECT_EQ(formatDtrack(DtrackFrame{1, 0.0, 4, bodies}, buffer), 0u);
+}
+
+TEST(Dtrack, FormatsWithoutAllocating) {
+    std::array<DtrackBody, 6> bodies{};
+    std::array<char, 2048> buffer{};
+    std::size_t total = 0;
+    const std::uint64_t allocations = test::countAllocations([&] {
+        for (std::uint64_t f = 0; f < 1000; ++f)
+            total += formatDtrack(DtrackFrame{f, 0.01 * static_cast<double>(f), 6, bodies}, buffer);
+    });
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_GT(total, 1000u * 6u * 80u);
+}
+
+TEST(Dtrack, RefusesMalformedDatagrams) {
+    EXPECT_FALSE(parseDtrack("fr 1\n6d 0\n"));
+    EXPECT_FALSE(parseDtrack("ts 1.0\r\n"));
+    EXPECT_FALSE(parseDtrack("fr 1\r\n6d 1 [0 1.0][1 2 3][1 0 0]\r\n"));
+    EXPECT_FALSE(parseDtrack("fr 1\r\n6d 1 [0 1.0][1 2 3][2 0 0 0 1 0 0 0 1]\r\n"));
+}
+
+} // namespace
+} // namespace edgetrack::app
