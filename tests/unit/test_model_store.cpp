@@ -101,6 +101,7 @@ TEST(ModelStore, APowerCutAtAnyOperationLeavesTheOldOrTheNewSet) {
         operations = flash.operations() - before;
     }
     ASSERT_GT(operations, 10u) << "the payload should take several page writes";
+    RecordProperty("save_operations", std::to_string(operations));
     for (double torn : {0.0, 0.5, 1.0}) {
         int oldLoads = 0, newLoads = 0;
         for (std::uint64_t cut = 0; cut <= operations; ++cut) {
