@@ -73,7 +73,9 @@ std::map<std::string, double> decode(const DbcMessage& message, const hal::CanFr
         std::uint64_t raw = 0;
         for (unsigned i = 0; i < s.length; ++i) {
             const unsigned bit = s.start + i;
-            raw |= static_cast<std::uint64_t>((frame.data[bit / 8] >> (bit % 8)) & 1u) << i;
+            raw |= static_cast<std::uint64_t>(
+                       (static_cast<unsigned>(frame.data[bit / 8]) >> (bit % 8)) & 1u)
+                   << i;
         }
         double value = static_cast<double>(raw);
         if (s.isSigned && s.length < 64 && ((raw >> (s.length - 1)) & 1u))
