@@ -83,6 +83,33 @@ std::size_t countCongruent(const MarkerModel& from, const MarkerModel& to,
     return count;
 }
 
+/**
+ * Call visit(x, y, z) for every co-visible triangle of `b` whose sides match (within `tolerance`)
+ * the sides |ij|, |ik|, |jk| of a triangle, in that order; stop when visit returns true.
+ * \return whether a visit stopped the search.
+ */
+template <typename Visit>
+bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::span<const Vec3> pb,
+                              const Adjacency& adjB, double tolerance, Visit&& visit) {
+    const double dij = (i - j).norm();
+    const double dik = (i - k).norm();
+    const double djk = (j - k).norm();
+    bool stopped = false;
+    for (std::size_t x = 0; x < adjB.size() && !stopped; ++x) {
+        adjB[x].forEach([&](std::size_t y) {
+            if (stopped || std::abs((pb[x] - pb[y]).norm() - dij) > tolerance)
+                return;
+            (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
+                if (stopped || std::abs((pb[x] - pb[z]).norm() - dik) > tolerance ||
+                    std::abs((pb[y] - pb[z]).norm() - djk) > tolerance)
+                    return;
+                stopped = visit(x, y, z);
+            });
+        });
+    }
+    return stopped;
+}
+
 // The most markers of `a` that fit `b` under one transform other than the identity of a model
 // with itself, found from congruent co-visible triangles.
 std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const MarkerModel& b,
@@ -99,28 +126,18 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
             (adjA[i] & adjA[j]).forEach([&](std::size_t k) {
                 if (k <= j || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
                     return;
-                const double dij = (pa[i] - pa[j]).norm();
-                const double dik = (pa[i] - pa[k]).norm();
-                const double djk = (pa[j] - pa[k]).norm();
-                for (std::size_t x = 0; x < adjB.size(); ++x) {
-                    adjB[x].forEach([&](std::size_t y) {
-                        if (std::abs((pb[x] - pb[y]).norm() - dij) > tol)
-                            return;
-                        (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
-                            if (self && x == i && y == j && z == k)
-                                return;
-                            if (std::abs((pb[x] - pb[z]).norm() - dik) > tol ||
-                                std::abs((pb[y] - pb[z]).norm() - djk) > tol)
-                                return;
-                            const Vec3 from[3] = {pa[i], pa[j], pa[k]};
-                            const Vec3 to[3] = {pb[x], pb[y], pb[z]};
-                            const std::optional<RigidFit> fit = fitRigid(from, to);
-                            if (!fit)
-                                return;
+                forEachCongruentTriangle(
+                    pa[i], pa[j], pa[k], pb.span(), adjB, tol,
+                    [&](std::size_t x, std::size_t y, std::size_t z) {
+                        if (self && x == i && y == j && z == k)
+                            return false;
+                        const Vec3 from[3] = {pa[i], pa[j], pa[k]};
+                        const Vec3 to[3] = {pb[x], pb[y], pb[z]};
+                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        if (fit)
                             best = std::max(best, countCongruent(a, b, fit->transform, tol2));
-                        });
+                        return false;
                     });
-                }
             });
         });
     }
@@ -170,28 +187,17 @@ bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& con
         });
     const double needed = config.sameShapeShare * static_cast<double>(smaller);
     for (const Triangle& t : widest) {
-        const double dij = (pa[t.i] - pa[t.j]).norm();
-        const double dik = (pa[t.i] - pa[t.k]).norm();
-        const double djk = (pa[t.j] - pa[t.k]).norm();
-        for (std::size_t x = 0; x < adjB.size(); ++x) {
-            bool found = false;
-            adjB[x].forEach([&](std::size_t y) {
-                if (found || std::abs((pb[x] - pb[y]).norm() - dij) > tol)
-                    return;
-                (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
-                    if (found || std::abs((pb[x] - pb[z]).norm() - dik) > tol ||
-                        std::abs((pb[y] - pb[z]).norm() - djk) > tol)
-                        return;
-                    const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
-                    const Vec3 to[3] = {pb[x], pb[y], pb[z]};
-                    const std::optional<RigidFit> fit = fitRigid(from, to);
-                    found = fit && static_cast<double>(
-                                       countCongruent(a, b, fit->transform, tol * tol)) >= needed;
-                });
+        const bool copy = forEachCongruentTriangle(
+            pa[t.i], pa[t.j], pa[t.k], pb.span(), adjB, tol,
+            [&](std::size_t x, std::size_t y, std::size_t z) {
+                const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
+                const Vec3 to[3] = {pb[x], pb[y], pb[z]};
+                const std::optional<RigidFit> fit = fitRigid(from, to);
+                return fit && static_cast<double>(
+                                  countCongruent(a, b, fit->transform, tol * tol)) >= needed;
             });
-            if (found)
-                return true;
-        }
+        if (copy)
+            return true;
     }
     return false;
 }
