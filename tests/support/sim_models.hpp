@@ -6,6 +6,7 @@
 #include "core/marker_model.hpp"
 #include "core/marker_set.hpp"
 #include "hal/sim/scene.hpp"
+#include "tests/support/layouts.hpp"
 
 namespace edgetrack::test {
 
@@ -20,16 +21,10 @@ inline std::vector<MarkerModel> truthModels(const sim::Scene& scene) {
         const auto& markers = scene.objects[k].object.markers;
         if (markers.size() < 4 || markers.size() > MarkerSet::kCapacity)
             continue;
-        MarkerModel m(markers.size());
-        m.id = static_cast<std::uint32_t>(k);
+        std::vector<Vec3> layout;
         for (const sim::SimMarker& marker : markers)
-            m.markers_model_mm.push_back(marker.position_object_mm);
-        for (std::size_t i = 0; i < markers.size(); ++i)
-            for (std::size_t j = i + 1; j < markers.size(); ++j)
-                m.edges.push_back(ModelEdge{
-                    static_cast<std::uint16_t>(i), static_cast<std::uint16_t>(j),
-                    (markers[i].position_object_mm - markers[j].position_object_mm).norm()});
-        models.push_back(std::move(m));
+            layout.push_back(marker.position_object_mm);
+        models.push_back(fullyConnectedModel(layout, static_cast<std::uint32_t>(k)));
     }
     computeSmin(models, SminConfig{});
     return models;

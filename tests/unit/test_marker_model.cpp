@@ -12,14 +12,7 @@ namespace edgetrack {
 namespace {
 
 MarkerModel fullyConnected(const std::vector<Vec3>& layout) {
-    MarkerModel model(layout.size());
-    for (const Vec3& p : layout)
-        model.markers_model_mm.push_back(p);
-    for (std::size_t i = 0; i < layout.size(); ++i)
-        for (std::size_t j = i + 1; j < layout.size(); ++j)
-            model.edges.push_back({static_cast<std::uint16_t>(i), static_cast<std::uint16_t>(j),
-                                   (layout[i] - layout[j]).norm()});
-    return model;
+    return test::fullyConnectedModel(layout);
 }
 
 std::vector<Vec3> irregularLayout(std::size_t count, unsigned seed) {

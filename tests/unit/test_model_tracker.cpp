@@ -12,19 +12,8 @@
 namespace edgetrack {
 namespace {
 
-/// A model of \a layout (mm) in which every pair of markers can be seen together.
 MarkerModel completeModel(const std::vector<Vec3>& layout, std::uint32_t id, std::uint32_t sMin) {
-    MarkerModel model(layout.size());
-    model.id = id;
-    for (const Vec3& p : layout)
-        model.markers_model_mm.push_back(p);
-    for (std::size_t i = 0; i < layout.size(); ++i)
-        for (std::size_t j = i + 1; j < layout.size(); ++j)
-            model.edges.push_back(ModelEdge{static_cast<std::uint16_t>(i),
-                                            static_cast<std::uint16_t>(j),
-                                            (layout[i] - layout[j]).norm()});
-    model.sMin = sMin;
-    return model;
+    return test::fullyConnectedModel(layout, id, sMin);
 }
 
 RigidTransform pose(double angle_rad, const Vec3& axis, const Vec3& translation_mm) {
