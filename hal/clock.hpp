@@ -15,6 +15,10 @@ public:
 
     /// \brief Block until now() >= \a deadline (returns at once if it already is).
     virtual void sleepUntil(Nanoseconds deadline) = 0;
+
+    /// \return UTC (ns since 1970) minus now(): added to a monotonic time it gives wall time,
+    /// e.g. for DTrack's `ts` (CLOCK_REALTIME - CLOCK_MONOTONIC on Linux).
+    virtual Nanoseconds utcOffset() const = 0;
 };
 
 } // namespace edgetrack::hal

@@ -18,7 +18,13 @@ Nanoseconds hostNow() {
 
 SimClock::SimClock(bool realTime)
     : realTime_(realTime)
-    , hostStart_(realTime ? hostNow() : 0) {}
+    , hostStart_(realTime ? hostNow() : 0) {
+    constexpr Nanoseconds kNoon20260101 = 1'767'268'800LL * hal::kNanosecondsPerSecond;
+    utcOffset_ = realTime ? std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                std::chrono::system_clock::now().time_since_epoch())
+                                .count()
+                          : kNoon20260101;
+}
 
 void SimClock::advanceTo(Nanoseconds t) {
     if (t <= now_)

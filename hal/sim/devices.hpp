@@ -33,6 +33,9 @@ public:
 
     Nanoseconds now() const override { return now_; }
     void sleepUntil(Nanoseconds deadline) override;
+    /// Virtual time 0 is 2026-01-01 12:00:00 UTC, so runs repeat exactly; in real-time mode it is
+    /// the host's wall clock at construction.
+    Nanoseconds utcOffset() const override { return utcOffset_; }
 
     /// \brief Move virtual time forward to \a t (never backward).
     void advanceTo(Nanoseconds t);
@@ -41,6 +44,7 @@ private:
     Nanoseconds now_ = 0;
     bool realTime_;
     Nanoseconds hostStart_ = 0;
+    Nanoseconds utcOffset_ = 0;
 };
 
 /// \brief The LED ring: remembers when it was lit so that the cameras know what they saw.
@@ -197,8 +201,9 @@ private:
 };
 
 /// \brief UDP in memory: keeps the last datagrams for tests (the oldest are dropped when full);
-/// destinations can be made unreachable. A datagram longer than kMaxDatagram fails, as it would
-/// not fit one Ethernet frame.
+/// destinations can be made unreachable. A datagram longer than kMaxDatagram fails: the firmware
+/// never needs more (DTrack frames of 16 bodies or 128 markers are under 8 KB; IP fragments what
+/// is over one Ethernet frame).
 class SimUdpSender : public hal::UdpSender {
 public:
     explicit SimUdpSender(std::size_t keep = 256);
@@ -207,7 +212,7 @@ public:
                             std::span<const std::uint8_t> datagram) override;
     hal::UdpCounters counters() const override { return counters_; }
 
-    static constexpr std::size_t kMaxDatagram = 1472; // one Ethernet frame of UDP payload
+    static constexpr std::size_t kMaxDatagram = 8192;
 
     struct Datagram {
         hal::UdpEndpoint to;

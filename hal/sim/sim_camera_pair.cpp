@@ -41,6 +41,23 @@ Nanoseconds SimCameraPair::exposureStart(std::uint64_t index) const {
     return static_cast<Nanoseconds>(index) * period_ - exposure_ / 2;
 }
 
+void SimCameraPair::addSpuriousBurst(std::uint64_t index) {
+    // A generator seeded by the frame, so the burst of a frame is the same whenever it is drawn.
+    std::uint64_t state = (index + 1) * 0x9E3779B97F4A7C15ULL ^ world_.seed();
+    auto uniform = [&state]() {
+        state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+        return static_cast<double>(state >> 11) * (1.0 / 9007199254740992.0);
+    };
+    for (std::vector<Glint>& glints : observation_.glints)
+        for (int i = 0; i < spuriousBurst_; ++i) {
+            Glint g;
+            g.centre_px = Vec2(8.0 + uniform() * (width_ - 16), 8.0 + uniform() * (height_ - 16));
+            g.radiusMajor_px = g.radiusMinor_px = 1.5 + uniform();
+            g.peak_dn = 300.0;
+            glints.push_back(g);
+        }
+}
+
 Nanoseconds SimCameraPair::nextExposureStart() const {
     return exposureStart(nextIndex_);
 }
@@ -80,6 +97,7 @@ hal::AcquireStatus SimCameraPair::acquire(hal::StereoFrame& frame, Nanoseconds t
         }
 
         world_.observe(index, observation_);
+        addSpuriousBurst(index);
         const auto s = static_cast<std::size_t>(slot);
         held_[s] = true;
         frame.number = delivered_++;

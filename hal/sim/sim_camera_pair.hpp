@@ -41,6 +41,9 @@ public:
     void injectFailure() { failed_ = true; }
     /// \brief Every n-th exposure loses camera 1's frame (0: never).
     void dropPartnerEvery(std::uint64_t n) { dropPartnerEvery_ = n; }
+    /// \brief Each image also shows \a perCamera small round reflections at random places (a
+    /// burst of spurious blobs, e.g. sunlight on a shiny surface); 0 ends the burst.
+    void setSpuriousBurst(int perCamera) { spuriousBurst_ = perCamera; }
 
     /// \return the observation rendered into the last delivered frame (ground truth for tests).
     const Observation& lastObservation() const { return observation_; }
@@ -52,6 +55,7 @@ public:
 
 private:
     Nanoseconds exposureStart(std::uint64_t index) const;
+    void addSpuriousBurst(std::uint64_t index);
 
     const World& world_;
     SimClock& clock_;
@@ -68,6 +72,7 @@ private:
     std::uint64_t nextIndex_ = 0;
     std::uint64_t delivered_ = 0;
     std::uint64_t dropPartnerEvery_ = 0;
+    int spuriousBurst_ = 0;
     bool started_ = false;
     bool stalled_ = false;
     bool failed_ = false;
