@@ -58,6 +58,15 @@ std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out) {
                 r(0, 1), r(1, 1), r(2, 1), r(0, 2), r(1, 2), r(2, 2));
     }
     a.print("\r\n");
+    if (!frame.markers.empty()) {
+        a.print("3d %zu", frame.markers.size());
+        for (const DtrackMarker& m : frame.markers)
+            a.print(" [%u %.3f][%.3f %.3f %.3f]", m.id, m.quality, m.position_mm.x(),
+                    m.position_mm.y(), m.position_mm.z());
+        a.print("\r\n");
+    }
+    if (frame.latency_s)
+        a.print("etlat %.6f\r\n", *frame.latency_s);
     return a.length();
 }
 
@@ -111,6 +120,21 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
                 body.T_rig_from_model = RigidTransform::fromMatrix(r, Vec3(v[2], v[3], v[4]));
                 parsed.bodies.push_back(body);
             }
+        } else if (line.rfind("3d ", 0) == 0) {
+            c += 3;
+            double count = 0.0;
+            if (!number(count))
+                return Error{"dtrack: 3d without a count"};
+            for (int m = 0; m < static_cast<int>(count); ++m) {
+                std::array<double, 5> v{};
+                for (double& x : v)
+                    if (!number(x))
+                        return Error{"dtrack: 3d marker " + std::to_string(m) + " is short"};
+                parsed.markers.push_back(
+                    {static_cast<std::uint32_t>(v[0]), v[1], Vec3(v[2], v[3], v[4])});
+            }
+        } else if (line.rfind("etlat ", 0) == 0) {
+            parsed.latency_s = std::strtod(c + 6, nullptr);
         }
     }
     if (!haveFrame)

@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string_view>
 #include <vector>
@@ -22,6 +23,14 @@ struct DtrackBody {
     RigidTransform T_rig_from_model;
 };
 
+/// \brief One single marker in a DTrack `3d` line.
+struct DtrackMarker {
+    std::uint32_t id = 0;
+    double quality = 1.0;
+    /// Rig frame (mm).
+    Vec3 position_mm = Vec3::Zero();
+};
+
 /// \brief Everything one DTrack datagram says.
 struct DtrackFrame {
     std::uint64_t frame = 0;
@@ -30,12 +39,18 @@ struct DtrackFrame {
     /// Number of calibrated bodies (`6dcal`).
     std::uint32_t calibrated = 0;
     std::span<const DtrackBody> bodies;
+    /// Single markers (`3d` line), left out when empty.
+    std::span<const DtrackMarker> markers;
+    /// Mid-exposure to send (s); written as the extension line `etlat` when set. DTrack clients
+    /// skip labels they do not know (DTrackSDK, VRPN's driver), so the frame stays readable.
+    std::optional<double> latency_s;
 };
 
 /**
  * \brief Write \a frame as one DTrack ASCII datagram into \a out, CRLF line ends:
  * `fr`, `ts`, `6dcal`, and `6d N [id q][x y z][r0 ... r8]` with the rotation column-wise and
- * positions in mm (`6d 0` when no body is found).
+ * positions in mm (`6d 0` when no body is found); then `3d N [id q][x y z]` when there are
+ * markers and `etlat SECONDS` when the latency is set.
  * \return the datagram's length, or 0 when it does not fit \a out (nothing partial is sent).
  * Allocates nothing: it runs in the frame loop.
  */
@@ -47,6 +62,8 @@ struct ParsedDtrack {
     double timestamp_s = 0.0;
     std::uint32_t calibrated = 0;
     std::vector<DtrackBody> bodies;
+    std::vector<DtrackMarker> markers;
+    std::optional<double> latency_s;
 };
 
 /// \brief Parse a datagram as a DTrack client does: the lines above, CRLF ends, unknown lines

@@ -17,7 +17,7 @@ TEST(Dtrack, WritesTheLinesDtrackClientsRead) {
     bodies[0].T_rig_from_model.rotation = Quat(Eigen::AngleAxisd(M_PI / 2.0, Vec3::UnitZ()));
     bodies[0].T_rig_from_model.translation_mm = Vec3(10.5, -20.25, 600.0);
     std::array<char, 512> buffer{};
-    const std::size_t length = formatDtrack(DtrackFrame{42, 3600.5, 2, bodies}, buffer);
+    const std::size_t length = formatDtrack(DtrackFrame{42, 3600.5, 2, bodies, {}, {}}, buffer);
     ASSERT_GT(length, 0u);
     EXPECT_EQ(std::string(buffer.data(), length),
               "fr 42\r\nts 3600.500000\r\n6dcal 2\r\n6d 1 [3 1.000][10.500 -20.250 600.000]"
@@ -27,7 +27,7 @@ TEST(Dtrack, WritesTheLinesDtrackClientsRead) {
 
 TEST(Dtrack, SaysSixDZeroWhenNothingIsTracked) {
     std::array<char, 128> buffer{};
-    const std::size_t length = formatDtrack(DtrackFrame{7, 1.0, 2, {}}, buffer);
+    const std::size_t length = formatDtrack(DtrackFrame{7, 1.0, 2, {}, {}, {}}, buffer);
     EXPECT_NE(std::string(buffer.data(), length).find("\r\n6d 0\r\n"), std::string::npos);
 }
 
@@ -41,7 +41,8 @@ TEST(Dtrack, ReadsBackWhatItWrites) {
         bodies[i].T_rig_from_model.translation_mm = Vec3(-100.0 * static_cast<double>(i), 5, 700);
     }
     std::array<char, 1024> buffer{};
-    const std::size_t length = formatDtrack(DtrackFrame{123456, 86399.25, 2, bodies}, buffer);
+    const std::size_t length =
+        formatDtrack(DtrackFrame{123456, 86399.25, 2, bodies, {}, {}}, buffer);
     const Result<ParsedDtrack> parsed = parseDtrack(std::string_view(buffer.data(), length));
     ASSERT_TRUE(parsed) << parsed.error().message;
     EXPECT_EQ(parsed->frame, 123456u);
@@ -64,7 +65,7 @@ TEST(Dtrack, ReadsBackWhatItWrites) {
 TEST(Dtrack, SendsNothingPartialWhenTheBufferIsShort) {
     std::array<DtrackBody, 4> bodies{};
     std::array<char, 200> buffer{};
-    EXPECT_EQ(formatDtrack(DtrackFrame{1, 0.0, 4, bodies}, buffer), 0u);
+    EXPECT_EQ(formatDtrack(DtrackFrame{1, 0.0, 4, bodies, {}, {}}, buffer), 0u);
 }
 
 TEST(Dtrack, FormatsWithoutAllocating) {
@@ -73,7 +74,8 @@ TEST(Dtrack, FormatsWithoutAllocating) {
     std::size_t total = 0;
     const std::uint64_t allocations = test::countAllocations([&] {
         for (std::uint64_t f = 0; f < 1000; ++f)
-            total += formatDtrack(DtrackFrame{f, 0.01 * static_cast<double>(f), 6, bodies}, buffer);
+            total += formatDtrack(DtrackFrame{f, 0.01 * static_cast<double>(f), 6, bodies, {}, {}},
+                                  buffer);
     });
     EXPECT_EQ(allocations, 0u);
     EXPECT_GT(total, 1000u * 6u * 80u);
