@@ -13,6 +13,7 @@
 #include "firmware_app/calibrate_command.hpp"
 #include "firmware_app/reconstruct_command.hpp"
 #include "firmware_app/recording/recording.hpp"
+#include "firmware_app/run_command.hpp"
 #include "firmware_app/sim_command.hpp"
 #include "firmware_app/track_command.hpp"
 
@@ -141,8 +142,17 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         return kExitUsage;
     }
 
-    if (runCommand->parsed())
-        return notBuilt(err, "run", 7);
+    if (runCommand->parsed()) {
+        RunCommandOptions options;
+        options.config = run.config;
+        options.board = run.board;
+        options.scene = run.scene;
+        options.frames = run.frames;
+        options.udp = run.udp;
+        options.can = run.can;
+        options.models = run.models;
+        return runFirmwareCommand(options, out, err);
+    }
     if (simCommand->parsed()) {
         if (sim.list) {
             listScenes(out);

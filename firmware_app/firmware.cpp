@@ -1,0 +1,722 @@
+// The board's frame loop: capture queue, strobe, pipeline, state machine, outputs, status.
+#include "firmware_app/firmware.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "core/marker_set.hpp"
+#include "firmware_app/output/can_pose.hpp"
+
+namespace edgetrack::app {
+
+namespace {
+
+/// The host's steady clock: stage times are CPU work, also on the simulated board's virtual time.
+std::int64_t hostNanos() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+}
+
+hal::Nanoseconds fromSeconds(double s) {
+    return static_cast<hal::Nanoseconds>(std::llround(s * 1e9));
+}
+
+/// Strobe pulses are scheduled this many exposures ahead of the last delivered one.
+constexpr int kStrobeAhead = 2;
+/// The ring stays lit continuously for the first frames, until pulses cover the exposures.
+constexpr std::uint64_t kContinuousFrames = 2;
+/// Markers in one calibration preview (`3d` line); the datagram buffer holds them.
+constexpr std::size_t kMaxPreviewMarkers = 128;
+constexpr std::size_t kDatagramBytes = 8192;
+constexpr hal::Nanoseconds kDay = 86400 * hal::kNanosecondsPerSecond;
+
+/// Models own fixed-capacity storage and are move-only; copies are explicit.
+MarkerModel copyOf(const MarkerModel& model) {
+    MarkerModel copy(model.markers_model_mm.size());
+    copy.assign(model);
+    return copy;
+}
+
+std::vector<NamedModel> copyOf(std::span<const NamedModel> models) {
+    std::vector<NamedModel> copies;
+    copies.reserve(models.size());
+    for (const NamedModel& m : models)
+        copies.push_back({copyOf(m.model), m.name});
+    return copies;
+}
+
+} // namespace
+
+const char* stateName(FirmwareState state) {
+    switch (state) {
+    case FirmwareState::Tracking:
+        return "tracking";
+    case FirmwareState::Calibrating:
+        return "calibrating";
+    case FirmwareState::Degraded:
+        return "degraded";
+    }
+    return "?";
+}
+
+const char* stageName(Stage stage) {
+    static constexpr const char* kNames[kStageCount] = {"blobs", "stereo", "track", "output",
+                                                        "frame"};
+    return kNames[static_cast<std::size_t>(stage)];
+}
+
+void StageTime::add(double us) {
+    last_us = us;
+    max_us = std::max(max_us, us);
+    ++count;
+    mean_us += (us - mean_us) / static_cast<double>(count);
+}
+
+Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig)
+    : config_(config)
+    , board_(board)
+    , width_px_(rig.camera(0).intrinsics().width_px)
+    , height_px_(rig.camera(0).intrinsics().height_px)
+    , blobs_{BoundedVector<Blob>(config.blobs.maxBlobs), BoundedVector<Blob>(config.blobs.maxBlobs)}
+    , stereo_(rig, config.stereo, config.blobs.maxBlobs)
+    , stereoMarkers_(config.stereo.maxMarkers)
+    , points_rig_mm_(config.stereo.maxMarkers)
+    , calibrator_(config.calibration)
+    , store_(board.flash, MarkerSet::kCapacity)
+    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s)) {
+    if (rig.camera(1).intrinsics().width_px != width_px_ ||
+        rig.camera(1).intrinsics().height_px != height_px_)
+        error_ = "the rig's two cameras must have the same image size";
+    for (std::optional<BlobDetector>& detector : detectors_)
+        detector.emplace(config.blobs, width_px_, height_px_);
+    if (!calibrator_.isValid())
+        error_ = "[calibration] settings are unusable (markers per object must be 4 to " +
+                 std::to_string(MarkerSet::kCapacity) + ")";
+    if (!store_.isValid())
+        error_ = "the flash partition cannot hold two model slots";
+    tracker_.emplace(std::span<const MarkerModel>{}, config.tracking);
+    if (!tracker_->isValid())
+        error_ = "[tracking] settings are unusable";
+
+    objectViews_.resize(config.calibration.maxObjects);
+    for (std::size_t i = 0; i < config.calibration.maxObjects; ++i)
+        learnt_.emplace_back(config.calibration.maxMarkersPerObject);
+    models_.reserve(config.maxModels);
+    filters_.assign(config.maxModels, PoseFilter(config.filter));
+    outputPoses_.resize(config.maxModels);
+    queue_.resize(config.cameras.queueDepth);
+    dtrackBodies_.reserve(config.maxModels);
+    dtrackMarkers_.reserve(kMaxPreviewMarkers);
+    datagram_.resize(kDatagramBytes);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Start, stop, models
+
+void Firmware::start() {
+    Result<StoredModels> loaded = store_.load();
+    if (loaded) {
+        std::vector<NamedModel> models = std::move(loaded->models);
+        if (models.size() > config_.maxModels) {
+            counters_.modelOverflow += models.size() - config_.maxModels;
+            models.resize(config_.maxModels);
+        }
+        const std::size_t count = models.size();
+        setModels(std::move(models));
+        flashReport_ = "loaded " + std::to_string(count) + (count == 1 ? " model" : " models") +
+                       " from flash slot " + (loaded->slot == 0 ? "A" : "B") + " (save #" +
+                       std::to_string(loaded->sequence) + ")";
+    } else {
+        setModels({});
+        flashReport_ = loaded.error().message;
+    }
+    state_ = FirmwareState::Tracking;
+    if (Status s = board_.cameras.start(); !s) {
+        enterDegraded(("cameras did not start: " + s.error().message).c_str());
+        return;
+    }
+    cameraStarted_ = true;
+    strobing_ = false;
+    board_.ledRing.setContinuous(true);
+    lastFrameAt_ = board_.clock.now();
+}
+
+void Firmware::stop() {
+    board_.cameras.stop();
+    board_.ledRing.setContinuous(false);
+    board_.statusLed.set(false);
+    cameraStarted_ = false;
+}
+
+void Firmware::setModels(std::vector<NamedModel> models) {
+    models_ = std::move(models);
+    std::vector<MarkerModel> layouts;
+    layouts.reserve(models_.size());
+    for (const NamedModel& m : models_)
+        layouts.push_back(copyOf(m.model));
+    tracker_.emplace(layouts, config_.tracking);
+    for (PoseFilter& f : filters_)
+        f.reset();
+}
+
+Status Firmware::replaceModels(std::vector<NamedModel> models) {
+    if (models.size() > config_.maxModels)
+        return Error{std::to_string(models.size()) + " models; [tracking] max_models is " +
+                     std::to_string(config_.maxModels)};
+    Status saved = store_.save(models);
+    if (!saved)
+        ++counters_.flashErrors;
+    setModels(std::move(models));
+    return saved;
+}
+
+std::span<const TrackedBody> Firmware::bodies() const {
+    if (state_ != FirmwareState::Tracking)
+        return {};
+    return tracker_->bodies();
+}
+
+std::size_t Firmware::calibrationObjects() const {
+    return state_ == FirmwareState::Calibrating ? calibrator_.objectCount() : 0;
+}
+
+void Firmware::note(std::string event) {
+    lastEvent_ = std::move(event);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Button and calibration sessions
+
+void Firmware::handleButton(hal::Nanoseconds now) {
+    hal::ButtonEdge edge;
+    while (board_.button.nextEdge(edge))
+        button_.edge(edge);
+    for (ButtonEvent event = button_.poll(now); event != ButtonEvent::None;
+         event = button_.poll(now)) {
+        if (event == ButtonEvent::LongPress) {
+            deleteModels();
+            continue;
+        }
+        if (state_ == FirmwareState::Calibrating)
+            finishCalibration("the button");
+        else if (state_ == FirmwareState::Tracking)
+            startCalibration();
+        else
+            note("button ignored: the cameras are down");
+    }
+}
+
+void Firmware::startCalibration() {
+    calibrator_.reset();
+    calibrationStart_s_ = hal::toSeconds(board_.clock.now());
+    calibrationChanged_s_ = calibrationStart_s_;
+    calibrationSignature_ = 0;
+    lastPreview_s_ = -1e9;
+    state_ = FirmwareState::Calibrating;
+    ++counters_.calibrationsStarted;
+    note("calibration started");
+}
+
+void Firmware::calibrationStep(double time_s) {
+    calibrator_.update(time_s, points_rig_mm_.span());
+    // The session settles when the objects that would be exported, and their markers, stop
+    // changing.
+    const std::size_t views = calibrator_.objectViews(objectViews_);
+    std::size_t objects = 0;
+    std::size_t markers = 0;
+    for (std::size_t i = 0; i < views; ++i)
+        if (objectViews_[i].established >= config_.calibration.minModelMarkers) {
+            ++objects;
+            markers += objectViews_[i].established;
+        }
+    const std::size_t signature = objects * 1'000'000 + markers;
+    if (signature != calibrationSignature_) {
+        calibrationSignature_ = signature;
+        calibrationChanged_s_ = time_s;
+    }
+    const double elapsed = time_s - calibrationStart_s_;
+    if (elapsed >= config_.session.maxDuration_s)
+        finishCalibration("its time limit");
+    else if (objects > 0 && elapsed >= config_.session.minDuration_s &&
+             time_s - calibrationChanged_s_ >= config_.session.settle_s)
+        finishCalibration("the models settled");
+}
+
+void Firmware::finishCalibration(const char* why) {
+    state_ = FirmwareState::Tracking;
+    char lasted[32];
+    std::snprintf(lasted, sizeof lasted, " after %.1f s", frameTime_s_ - calibrationStart_s_);
+    const std::size_t count = calibrator_.exportModels(learnt_);
+    if (count == 0) {
+        ++counters_.calibrationsEmpty;
+        tracker_->reset();
+        note(std::string("calibration ended by ") + why + lasted +
+             ": no object learnt; models unchanged");
+        return;
+    }
+    // A learnt object that has the layout of a known model replaces it under the known id, so
+    // a host's body numbers survive a recalibration; others take the lowest free id.
+    std::vector<NamedModel> merged = copyOf(models_);
+    std::vector<bool> replaced(merged.size(), false);
+    std::size_t added = 0;
+    std::size_t updated = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        MarkerModel learnt = copyOf(learnt_[i]);
+        std::size_t match = merged.size();
+        for (std::size_t j = 0; j < merged.size() && match == merged.size(); ++j)
+            if (j < replaced.size() && !replaced[j] &&
+                sameShape(merged[j].model, learnt, config_.calibration.smin))
+                match = j;
+        if (match < merged.size()) {
+            learnt.id = merged[match].model.id;
+            merged[match].model = std::move(learnt);
+            replaced[match] = true;
+            ++updated;
+            continue;
+        }
+        if (merged.size() >= config_.maxModels) {
+            ++counters_.modelOverflow;
+            continue;
+        }
+        std::uint32_t id = 0;
+        while (std::any_of(merged.begin(), merged.end(),
+                           [&](const NamedModel& m) { return m.model.id == id; }))
+            ++id;
+        learnt.id = id;
+        merged.push_back({std::move(learnt), "body " + std::to_string(id)});
+        ++added;
+    }
+    // S_min holds against the whole set, old models included.
+    std::vector<MarkerModel> layouts;
+    for (const NamedModel& m : merged)
+        layouts.push_back(copyOf(m.model));
+    computeSmin(layouts, config_.calibration.smin);
+    for (std::size_t i = 0; i < merged.size(); ++i) {
+        merged[i].model.sMin = layouts[i].sMin;
+        merged[i].model.sameShapeAs = layouts[i].sameShapeAs;
+    }
+    const Status saved = store_.save(merged);
+    std::string event = std::string("calibration ended by ") + why + lasted + ": " +
+                        std::to_string(added) + " new, " + std::to_string(updated) + " updated; " +
+                        std::to_string(merged.size()) + " models";
+    if (saved) {
+        ++counters_.calibrationsSaved;
+        event += ", saved to flash";
+    } else {
+        ++counters_.flashErrors;
+        event += ", NOT saved to flash (" + saved.error().message + ")";
+    }
+    setModels(std::move(merged));
+    note(std::move(event));
+}
+
+void Firmware::deleteModels() {
+    if (state_ == FirmwareState::Calibrating) {
+        ++counters_.calibrationsAbandoned;
+        state_ = FirmwareState::Tracking;
+    }
+    const Status saved = store_.save({});
+    if (!saved)
+        ++counters_.flashErrors;
+    setModels({});
+    ++counters_.modelDeletions;
+    oneShot_ = LedPattern::Confirm;
+    oneShotUntil_ = board_.clock.now() + patternDuration(LedPattern::Confirm);
+    ledPatternSince_ = board_.clock.now();
+    note(saved ? "all models deleted (long press)"
+               : "models deleted, but flash failed: " + saved.error().message);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frame loop
+
+void Firmware::step() {
+    const hal::Nanoseconds now = board_.clock.now();
+    handleButton(now);
+    if (state_ == FirmwareState::Degraded) {
+        retryCameras(now);
+        updateStatusLed(board_.clock.now());
+        return;
+    }
+    capture();
+    if (queueSize_ > 0) {
+        const Queued next = queue_[queueHead_];
+        queueHead_ = (queueHead_ + 1) % queue_.size();
+        --queueSize_;
+        process(next.frame, next.acquiredAt, next.acquiredHost_ns);
+        board_.cameras.release(next.frame);
+    }
+    drainCanErrors();
+    updateStatusLed(board_.clock.now());
+}
+
+void Firmware::capture() {
+    const hal::Nanoseconds period = board_.cameras.framePeriod();
+    // Wait for a frame only when there is nothing to process: capture never waits on processing.
+    const hal::Nanoseconds wait = queueSize_ > 0 ? 0 : period + period / 2;
+    hal::StereoFrame frame;
+    hal::AcquireStatus status = board_.cameras.acquire(frame, wait);
+    bool any = false;
+    while (status == hal::AcquireStatus::Frame) {
+        any = true;
+        const hal::Nanoseconds at = board_.clock.now();
+        lastFrameAt_ = at;
+        scheduleStrobe(frame);
+        enqueue(Queued{frame, at, hostNanos()});
+        status = board_.cameras.acquire(frame, 0);
+    }
+    if (status == hal::AcquireStatus::Failed) {
+        ++counters_.cameraFailures;
+        enterDegraded("a camera failed");
+    } else if (status == hal::AcquireStatus::Stopped) {
+        enterDegraded("the cameras stopped");
+    } else if (!any && wait > 0) {
+        ++counters_.cameraTimeouts;
+        if (board_.clock.now() - lastFrameAt_ > fromSeconds(config_.cameras.timeout_s))
+            enterDegraded("no frames from the cameras");
+    }
+}
+
+void Firmware::enqueue(const Queued& queued) {
+    if (queueSize_ == queue_.size()) {
+        // Drop the oldest: the newest exposure is the one worth processing.
+        board_.cameras.release(queue_[queueHead_].frame);
+        queueHead_ = (queueHead_ + 1) % queue_.size();
+        --queueSize_;
+        ++counters_.framesDroppedQueue;
+    }
+    queue_[(queueHead_ + queueSize_) % queue_.size()] = queued;
+    ++queueSize_;
+}
+
+void Firmware::scheduleStrobe(const hal::StereoFrame& frame) {
+    const hal::Nanoseconds start =
+        std::min(frame.camera[0].exposureStart, frame.camera[1].exposureStart);
+    const hal::Nanoseconds end = std::max(frame.camera[0].exposureEnd, frame.camera[1].exposureEnd);
+    const hal::Nanoseconds period = board_.cameras.framePeriod();
+    const hal::Nanoseconds lead = fromSeconds(config_.gpio.strobeLead_us * 1e-6);
+    const hal::Nanoseconds tail = fromSeconds(config_.gpio.strobeTail_us * 1e-6);
+    for (int k = 1; k <= kStrobeAhead; ++k) {
+        const hal::Nanoseconds next = start + k * period;
+        if (strobing_ && next <= lastStrobeStart_ + period / 2)
+            continue;
+        if (!board_.ledRing.schedulePulse(next - lead, next + (end - start) + tail))
+            ++counters_.strobePulsesRefused;
+        lastStrobeStart_ = next;
+        strobing_ = true;
+    }
+    // Lit continuously until the pulses already cover the exposure being taken now.
+    if (++strobeFrames_ == kContinuousFrames)
+        board_.ledRing.setContinuous(false);
+}
+
+void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                       std::int64_t acquiredHost_ns) {
+    const std::int64_t t0 = hostNanos();
+    for (std::size_t c = 0; c < 2; ++c)
+        if (frame.camera[c].width_px != width_px_ || frame.camera[c].height_px != height_px_ ||
+            frame.camera[c].stride_bytes < width_px_ || frame.camera[c].pixels == nullptr) {
+            ++counters_.framesWrongSize;
+            return;
+        }
+    for (std::size_t c = 0; c < 2; ++c)
+        detectors_[c]->detect(frame.camera[c].pixels, frame.camera[c].stride_bytes, blobs_[c]);
+    const std::int64_t t1 = hostNanos();
+    stereo_.match(blobs_[0].span(), blobs_[1].span(), stereoMarkers_);
+    points_rig_mm_.clear();
+    for (const StereoMarker& m : stereoMarkers_)
+        points_rig_mm_.push_back(m.position_rig_mm);
+    const std::int64_t t2 = hostNanos();
+
+    const double time_s = hal::toSeconds(frame.midExposure());
+    if (state_ == FirmwareState::Calibrating) {
+        calibrationStep(time_s);
+    } else {
+        tracker_->update(time_s, points_rig_mm_.span());
+        const std::span<const TrackedBody> tracked = tracker_->bodies();
+        for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
+            if (tracked[b].found())
+                outputPoses_[b] = filters_[b].update(time_s, tracked[b].T_rig_from_model);
+    }
+    const std::int64_t t3 = hostNanos();
+    sendOutputs(frame, acquiredAt, acquiredHost_ns);
+    const std::int64_t t4 = hostNanos();
+
+    stageTimes_[static_cast<std::size_t>(Stage::Blobs)].add(static_cast<double>(t1 - t0) * 1e-3);
+    stageTimes_[static_cast<std::size_t>(Stage::Stereo)].add(static_cast<double>(t2 - t1) * 1e-3);
+    stageTimes_[static_cast<std::size_t>(Stage::Track)].add(static_cast<double>(t3 - t2) * 1e-3);
+    stageTimes_[static_cast<std::size_t>(Stage::Output)].add(static_cast<double>(t4 - t3) * 1e-3);
+    stageTimes_[static_cast<std::size_t>(Stage::Frame)].add(static_cast<double>(t4 - t0) * 1e-3);
+    const hal::Nanoseconds budget = config_.health.frameBudget_ms > 0.0
+                                        ? fromSeconds(config_.health.frameBudget_ms * 1e-3)
+                                        : board_.cameras.framePeriod();
+    if (t4 - t0 > budget)
+        ++counters_.framesOverBudget;
+
+    counters_.blobOverflow =
+        detectors_[0]->counters().blobOverflow + detectors_[1]->counters().blobOverflow;
+    counters_.labelOverflow =
+        detectors_[0]->counters().labelOverflow + detectors_[1]->counters().labelOverflow;
+    counters_.markerOverflow = stereo_.counters().markerOverflow;
+    ++counters_.framesProcessed;
+    lastFrame_ = frame.number;
+    frameTime_s_ = time_s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Outputs
+
+void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                           std::int64_t acquiredHost_ns) {
+    // Time on the board's clock until the frame was in hand, then the host's time spent on it:
+    // on the real board both are CLOCK_MONOTONIC; the simulated board's clock is virtual.
+    const double latency_s = hal::toSeconds(acquiredAt - frame.midExposure()) +
+                             static_cast<double>(hostNanos() - acquiredHost_ns) * 1e-9;
+    lastLatency_s_ = latency_s;
+    if (config_.udp.enabled)
+        sendDtrack(frame, latency_s);
+    if (config_.can.enabled && state_ == FirmwareState::Tracking)
+        sendCan(frame, latency_s);
+}
+
+void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
+    dtrackBodies_.clear();
+    dtrackMarkers_.clear();
+    if (state_ == FirmwareState::Tracking) {
+        const std::span<const TrackedBody> tracked = tracker_->bodies();
+        for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
+            if (tracked[b].found())
+                dtrackBodies_.push_back({tracked[b].modelId, 1.0, outputPoses_[b]});
+    } else if (state_ == FirmwareState::Calibrating && config_.session.previewRate_hz > 0.0 &&
+               frameTime_s_ - lastPreview_s_ >= 1.0 / config_.session.previewRate_hz) {
+        lastPreview_s_ = frameTime_s_;
+        // The growing models where they are now: established members, id = object * 1000 +
+        // marker, so a viewer can colour them by object.
+        calibrator_.forEachMember([&](const ObjectCalibrator::MemberView& m) {
+            if (m.established && dtrackMarkers_.size() < kMaxPreviewMarkers)
+                dtrackMarkers_.push_back(
+                    {m.objectId * 1000 + m.markerId % 1000, 1.0, m.position_rig_mm});
+        });
+    }
+    DtrackFrame out;
+    out.frame = frame.number;
+    const hal::Nanoseconds utc = frame.midExposure() + board_.clock.utcOffset();
+    out.timestamp_s = hal::toSeconds(((utc % kDay) + kDay) % kDay);
+    out.calibrated = static_cast<std::uint32_t>(models_.size());
+    out.bodies = dtrackBodies_;
+    out.markers = dtrackMarkers_;
+    if (config_.udp.latencyLine)
+        out.latency_s = latency_s;
+    const std::size_t length = formatDtrack(out, datagram_);
+    if (length == 0) {
+        ++counters_.udpTooLarge;
+        return;
+    }
+    const std::span<const std::uint8_t> bytes(
+        reinterpret_cast<const std::uint8_t*>(datagram_.data()), length);
+    for (const hal::UdpEndpoint& to : config_.udp.destinations) {
+        if (board_.udp.send(to, bytes) == hal::UdpSendResult::Sent)
+            ++counters_.udpSent;
+        else
+            ++counters_.udpFailed;
+    }
+}
+
+void Firmware::sendCan(const hal::StereoFrame& frame, double latency_s) {
+    auto send = [&](const hal::CanFrame& canFrame) {
+        switch (board_.can.send(canFrame)) {
+        case hal::CanSendResult::Queued:
+            ++counters_.canSent;
+            break;
+        case hal::CanSendResult::DroppedOldest:
+            ++counters_.canSent;
+            ++counters_.canDropped;
+            break;
+        default:
+            ++counters_.canRefused;
+            break;
+        }
+    };
+    const std::span<const TrackedBody> tracked = tracker_->bodies();
+    for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b) {
+        const TrackedBody& body = tracked[b];
+        if (body.modelId >= config_.can.layout.maxBodies) {
+            ++counters_.canBodiesBeyondLayout;
+            continue;
+        }
+        CanPose pose;
+        pose.body = body.modelId;
+        pose.found = body.found();
+        pose.frame = frame.number;
+        pose.T_rig_from_model = outputPoses_[b];
+        pose.markers = body.markers;
+        pose.rms_mm = body.rms_mm;
+        pose.latency_s = latency_s;
+        if (config_.can.fd) {
+            send(encodeFdPose(pose, config_.can.layout));
+            continue;
+        }
+        const std::array<hal::CanFrame, 3> frames = encodeClassicPose(pose, config_.can.layout);
+        // A body not found sends its status only: the bus carries what a receiver can use.
+        for (std::size_t i = pose.found ? 0 : 2; i < frames.size(); ++i)
+            send(frames[i]);
+    }
+}
+
+void Firmware::drainCanErrors() {
+    hal::CanErrorEvent event;
+    while (board_.can.nextError(event))
+        ++counters_.canErrors;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Degraded state and the status LED
+
+void Firmware::enterDegraded(const char* why) {
+    board_.cameras.stop();
+    cameraStarted_ = false;
+    while (queueSize_ > 0) {
+        board_.cameras.release(queue_[queueHead_].frame);
+        queueHead_ = (queueHead_ + 1) % queue_.size();
+        --queueSize_;
+    }
+    if (state_ == FirmwareState::Calibrating)
+        ++counters_.calibrationsAbandoned;
+    state_ = FirmwareState::Degraded;
+    nextRetryAt_ = board_.clock.now() + fromSeconds(config_.cameras.retry_s);
+    board_.ledRing.setContinuous(false);
+    note(std::string("degraded: ") + why + "; retrying every " +
+         std::to_string(config_.cameras.retry_s).substr(0, 4) + " s");
+}
+
+void Firmware::retryCameras(hal::Nanoseconds now) {
+    if (now < nextRetryAt_) {
+        board_.clock.sleepUntil(std::min(nextRetryAt_, now + board_.cameras.framePeriod()));
+        return;
+    }
+    ++counters_.cameraRestarts;
+    if (Status s = board_.cameras.start(); !s) {
+        nextRetryAt_ = now + fromSeconds(config_.cameras.retry_s);
+        return;
+    }
+    cameraStarted_ = true;
+    strobing_ = false;
+    strobeFrames_ = 0;
+    board_.ledRing.setContinuous(true);
+    lastFrameAt_ = board_.clock.now();
+    tracker_->reset();
+    state_ = FirmwareState::Tracking;
+    note("cameras restarted");
+}
+
+void Firmware::updateStatusLed(hal::Nanoseconds now) {
+    LedPattern pattern = LedPattern::Heartbeat;
+    if (now < oneShotUntil_)
+        pattern = oneShot_;
+    else if (state_ == FirmwareState::Degraded)
+        pattern = LedPattern::FastBlink;
+    else if (state_ == FirmwareState::Calibrating)
+        pattern = LedPattern::Blink;
+    else if (std::any_of(tracker_->bodies().begin(), tracker_->bodies().end(),
+                         [](const TrackedBody& b) { return b.found(); }))
+        pattern = LedPattern::On;
+    if (pattern != ledPattern_) {
+        ledPattern_ = pattern;
+        ledPatternSince_ = now;
+    }
+    const bool on = ledLevel(pattern, now - ledPatternSince_);
+    if (on != ledOn_) {
+        ledOn_ = on;
+        board_.statusLed.set(on);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Status view
+
+std::string Firmware::statusLine() const {
+    std::size_t found = 0;
+    for (const TrackedBody& b : bodies())
+        found += b.found() ? 1u : 0u;
+    char line[256];
+    const StageTime& frame = stageTime(Stage::Frame);
+    if (state_ == FirmwareState::Calibrating)
+        std::snprintf(line, sizeof line, "%s: frame %llu, %zu objects", stateName(state_),
+                      static_cast<unsigned long long>(lastFrame_), calibrationObjects());
+    else
+        std::snprintf(line, sizeof line, "%s: frame %llu, %zu of %zu bodies", stateName(state_),
+                      static_cast<unsigned long long>(lastFrame_), found, models_.size());
+    std::string text = line;
+    std::snprintf(line, sizeof line,
+                  "; frame %.2f ms (max %.2f), latency %.2f ms; dropped %llu, over budget %llu; "
+                  "udp %llu sent, can %llu sent",
+                  frame.mean_us * 1e-3, frame.max_us * 1e-3, lastLatency_s_ * 1e3,
+                  static_cast<unsigned long long>(counters_.framesDroppedQueue +
+                                                  board_.cameras.counters().droppedUnpaired +
+                                                  board_.cameras.counters().droppedNoBuffer),
+                  static_cast<unsigned long long>(counters_.framesOverBudget),
+                  static_cast<unsigned long long>(counters_.udpSent),
+                  static_cast<unsigned long long>(counters_.canSent));
+    return text + line;
+}
+
+std::string Firmware::statusReport() const {
+    std::string out = "state " + std::string(stateName(state_)) + ", " +
+                      std::to_string(models_.size()) + " models\n";
+    out += "flash: " + flashReport_ + "\n";
+    if (!lastEvent_.empty())
+        out += "last event: " + lastEvent_ + "\n";
+    char line[160];
+    out += "stage      last_us    mean_us     max_us\n";
+    for (std::size_t s = 0; s < kStageCount; ++s) {
+        const StageTime& t = stageTimes_[s];
+        std::snprintf(line, sizeof line, "%-8s %9.1f %10.1f %10.1f\n",
+                      stageName(static_cast<Stage>(s)), t.last_us, t.mean_us, t.max_us);
+        out += line;
+    }
+    const hal::CameraPairCounters cam = board_.cameras.counters();
+    auto row = [&](const char* name, std::uint64_t value) {
+        std::snprintf(line, sizeof line, "%-34s %llu\n", name,
+                      static_cast<unsigned long long>(value));
+        out += line;
+    };
+    const FirmwareCounters& c = counters_;
+    row("frames delivered by the cameras", cam.delivered);
+    row("frames processed", c.framesProcessed);
+    row("frames dropped: unpaired", cam.droppedUnpaired);
+    row("frames dropped: no free buffer", cam.droppedNoBuffer);
+    row("frames dropped: queue full", c.framesDroppedQueue);
+    row("frames dropped: wrong size", c.framesWrongSize);
+    row("frames over budget", c.framesOverBudget);
+    row("camera timeouts", c.cameraTimeouts);
+    row("camera failures", c.cameraFailures + cam.failures);
+    row("camera restarts", c.cameraRestarts);
+    row("strobe pulses refused", c.strobePulsesRefused + board_.ledRing.droppedPulses());
+    row("blobs refused (capacity)", c.blobOverflow);
+    row("blob labels refused (capacity)", c.labelOverflow);
+    row("markers refused (capacity)", c.markerOverflow);
+    const ModelTrackingCounters& t = tracker_->counters();
+    row("tracking: points refused", t.pointOverflow);
+    row("tracking: frames out of budget", t.budgetExhausted);
+    row("udp sent", c.udpSent);
+    row("udp failed", c.udpFailed);
+    row("udp frames too large", c.udpTooLarge);
+    row("can sent", c.canSent);
+    row("can dropped (queue full)", c.canDropped);
+    row("can refused (bus-off, down)", c.canRefused);
+    row("can error events", c.canErrors);
+    row("can bodies beyond the layout", c.canBodiesBeyondLayout);
+    row("calibrations started", c.calibrationsStarted);
+    row("calibrations saved", c.calibrationsSaved);
+    row("calibrations with no object", c.calibrationsEmpty);
+    row("calibrations abandoned", c.calibrationsAbandoned);
+    row("models refused (max_models)", c.modelOverflow);
+    row("model deletions", c.modelDeletions);
+    row("flash errors", c.flashErrors);
+    return out;
+}
+
+} // namespace edgetrack::app

@@ -1,0 +1,236 @@
+// The board's firmware: the frame loop and state machine (tracking, calibrating, degraded).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/blob_detector.hpp"
+#include "core/bounded_vector.hpp"
+#include "core/model_tracker.hpp"
+#include "core/object_calibrator.hpp"
+#include "core/pose_filter.hpp"
+#include "core/stereo_matcher.hpp"
+#include "firmware_app/button_input.hpp"
+#include "firmware_app/firmware_config.hpp"
+#include "firmware_app/model_store.hpp"
+#include "firmware_app/output/dtrack.hpp"
+#include "firmware_app/status_pattern.hpp"
+#include "hal/hal.hpp"
+
+namespace edgetrack::app {
+
+enum class FirmwareState : std::uint8_t {
+    /// Models are tracked and poses sent (with no models, empty frames are sent).
+    Tracking,
+    /// A field calibration is learning objects; their growing models are sent as markers.
+    Calibrating,
+    /// The cameras are gone: nothing is sent and the cameras are restarted every retry_s.
+    Degraded,
+};
+
+const char* stateName(FirmwareState state);
+
+/// \brief The stages of one frame whose run time the status view shows.
+enum class Stage : std::uint8_t { Blobs, Stereo, Track, Output, Frame };
+inline constexpr std::size_t kStageCount = 5;
+const char* stageName(Stage stage);
+
+/// \brief Run time of one stage (microseconds of the host's steady clock): last, mean, max.
+struct StageTime {
+    double last_us = 0.0;
+    double mean_us = 0.0;
+    double max_us = 0.0;
+    std::uint64_t count = 0;
+
+    void add(double us);
+};
+
+/// \brief Counters of the frame loop, for the status view (PX4's perf counters).
+struct FirmwareCounters {
+    std::uint64_t framesProcessed = 0;
+    /// Frames dropped from the full capture queue (the oldest goes) because processing lagged.
+    std::uint64_t framesDroppedQueue = 0;
+    /// Frames whose processing took longer than the frame budget.
+    std::uint64_t framesOverBudget = 0;
+    /// Frames of a size other than the rig's; dropped.
+    std::uint64_t framesWrongSize = 0;
+    std::uint64_t cameraTimeouts = 0;
+    std::uint64_t cameraFailures = 0;
+    std::uint64_t cameraRestarts = 0;
+    std::uint64_t strobePulsesRefused = 0;
+    /// Blob detection and stereo: what did not fit their capacities.
+    std::uint64_t blobOverflow = 0;
+    std::uint64_t labelOverflow = 0;
+    std::uint64_t markerOverflow = 0;
+    std::uint64_t udpSent = 0;
+    std::uint64_t udpFailed = 0;
+    /// DTrack frames larger than the datagram buffer; not sent.
+    std::uint64_t udpTooLarge = 0;
+    std::uint64_t canSent = 0;
+    std::uint64_t canDropped = 0;
+    std::uint64_t canRefused = 0;
+    std::uint64_t canErrors = 0;
+    /// Bodies whose model id is beyond the CAN layout's bodies; not sent on CAN.
+    std::uint64_t canBodiesBeyondLayout = 0;
+    std::uint64_t calibrationsStarted = 0;
+    std::uint64_t calibrationsSaved = 0;
+    std::uint64_t calibrationsEmpty = 0;
+    std::uint64_t calibrationsAbandoned = 0;
+    /// Learnt models that did not fit max_models.
+    std::uint64_t modelOverflow = 0;
+    std::uint64_t modelDeletions = 0;
+    std::uint64_t flashErrors = 0;
+};
+
+/**
+ * \brief The firmware on one board: owns every stage's storage and runs the frame loop.
+ *
+ * The constructor allocates everything a frame needs from the configuration (buffers, blob and
+ * marker capacities, calibrator, queues); step() then allocates nothing while tracking. Loading
+ * and saving models (start-up, the end of a calibration, a long press) allocates: those are state
+ * changes, not frames.
+ *
+ * One step() handles the button, waits for the next paired frame (at most a frame period and a
+ * bit), drains any other completed frames into the capture queue (dropping the oldest when it is
+ * full, so capture never waits for processing), schedules the LED strobe for the coming
+ * exposures, processes the oldest queued frame (blobs, stereo, tracking or calibration, outputs)
+ * and updates the status LED.
+ */
+class Firmware {
+public:
+    /// \param rig the stereo calibration of \a board's cameras.
+    Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig);
+
+    /// \return false when the configuration cannot run (see error()).
+    bool isValid() const { return error_.empty(); }
+    const std::string& error() const { return error_; }
+
+    /// \brief Load the models from flash (with none when both slots are bad; see flashReport())
+    /// and start the cameras (degraded, and retried, when they do not start).
+    void start();
+    /// \brief One turn of the loop (see the class description).
+    void step();
+    void stop();
+
+    /// \brief Replace the model set (e.g. from `--models DIR`) and keep it on flash.
+    Status replaceModels(std::vector<NamedModel> models);
+
+    FirmwareState state() const { return state_; }
+    /// \return true once cameras, flash and outputs are up: when systemd may be told READY=1.
+    bool ready() const { return cameraStarted_ && state_ != FirmwareState::Degraded; }
+    std::span<const NamedModel> models() const { return models_; }
+    /// \return the bodies after the last processed frame (empty while calibrating).
+    std::span<const TrackedBody> bodies() const;
+    /// \return how many objects the running calibration holds (0 when not calibrating).
+    std::size_t calibrationObjects() const;
+    const FirmwareCounters& counters() const { return counters_; }
+    const StageTime& stageTime(Stage stage) const {
+        return stageTimes_[static_cast<std::size_t>(stage)];
+    }
+    /// \return frame number of the last processed frame.
+    std::uint64_t lastFrame() const { return lastFrame_; }
+    /// \return latency of the last processed frame, mid-exposure to send (s).
+    double lastLatency_s() const { return lastLatency_s_; }
+    /// \return what start-up found on flash, and the last event worth telling (one line each).
+    const std::string& flashReport() const { return flashReport_; }
+    const std::string& lastEvent() const { return lastEvent_; }
+
+    /// \brief One status line for the console: state, frame, bodies, stage times, drops.
+    std::string statusLine() const;
+    /// \brief Every counter and stage time, one per line (`edgetrack status`).
+    std::string statusReport() const;
+
+private:
+    void handleButton(hal::Nanoseconds now);
+    void startCalibration();
+    void finishCalibration(const char* why);
+    void deleteModels();
+    void setModels(std::vector<NamedModel> models);
+
+    struct Queued;
+    void capture();
+    void enqueue(const Queued& queued);
+    void scheduleStrobe(const hal::StereoFrame& frame);
+    void process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                 std::int64_t acquiredHost_ns);
+    void calibrationStep(double time_s);
+    void sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                     std::int64_t acquiredHost_ns);
+    void sendDtrack(const hal::StereoFrame& frame, double latency_s);
+    void sendCan(const hal::StereoFrame& frame, double latency_s);
+    void drainCanErrors();
+    void enterDegraded(const char* why);
+    void retryCameras(hal::Nanoseconds now);
+    void updateStatusLed(hal::Nanoseconds now);
+    void note(std::string event);
+
+    FirmwareConfig config_;
+    hal::Board& board_;
+    std::string error_;
+
+    // Frame pipeline, sized by the constructor.
+    int width_px_ = 0;
+    int height_px_ = 0;
+    std::array<std::optional<BlobDetector>, 2> detectors_;
+    std::array<BoundedVector<Blob>, 2> blobs_;
+    StereoMatcher stereo_;
+    BoundedVector<StereoMarker> stereoMarkers_;
+    BoundedVector<Vec3> points_rig_mm_;
+    std::optional<ModelTracker> tracker_;
+    std::vector<PoseFilter> filters_;
+    /// Per body: the pose sent (filtered when the filter is on), model to rig (mm).
+    std::vector<RigidTransform> outputPoses_;
+    ObjectCalibrator calibrator_;
+    std::vector<CalibrationObjectView> objectViews_;
+    std::vector<MarkerModel> learnt_;
+    std::vector<NamedModel> models_;
+    ModelStore store_;
+
+    // Capture queue: frames taken from the cameras and not yet processed, oldest first.
+    struct Queued {
+        hal::StereoFrame frame;
+        hal::Nanoseconds acquiredAt = 0;
+        std::int64_t acquiredHost_ns = 0;
+    };
+    std::vector<Queued> queue_;
+    std::size_t queueHead_ = 0;
+    std::size_t queueSize_ = 0;
+
+    // Outputs.
+    std::vector<DtrackBody> dtrackBodies_;
+    std::vector<DtrackMarker> dtrackMarkers_;
+    std::vector<char> datagram_;
+
+    // State.
+    FirmwareState state_ = FirmwareState::Tracking;
+    bool cameraStarted_ = false;
+    hal::Nanoseconds lastFrameAt_ = 0;
+    hal::Nanoseconds nextRetryAt_ = 0;
+    hal::Nanoseconds lastStrobeStart_ = 0;
+    bool strobing_ = false;
+    std::uint64_t strobeFrames_ = 0;
+    ButtonInput button_;
+    LedPattern ledPattern_ = LedPattern::Heartbeat;
+    hal::Nanoseconds ledPatternSince_ = 0;
+    bool ledOn_ = false;
+    hal::Nanoseconds oneShotUntil_ = 0;
+    LedPattern oneShot_ = LedPattern::Confirm;
+    double calibrationStart_s_ = 0.0;
+    double calibrationChanged_s_ = 0.0;
+    double lastPreview_s_ = -1e9;
+    std::size_t calibrationSignature_ = 0;
+    double frameTime_s_ = 0.0;
+
+    FirmwareCounters counters_{};
+    std::array<StageTime, kStageCount> stageTimes_{};
+    std::uint64_t lastFrame_ = 0;
+    double lastLatency_s_ = 0.0;
+    std::string flashReport_;
+    std::string lastEvent_;
+};
+
+} // namespace edgetrack::app

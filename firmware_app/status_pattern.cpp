@@ -1,0 +1,42 @@
+// Status LED blink patterns.
+#include "firmware_app/status_pattern.hpp"
+
+namespace edgetrack::app {
+
+namespace {
+constexpr hal::Nanoseconds kMs = hal::kNanosecondsPerMillisecond;
+
+/// On for the first \a on of every \a period.
+bool square(hal::Nanoseconds since, hal::Nanoseconds period, hal::Nanoseconds on) {
+    return since % period < on;
+}
+} // namespace
+
+bool ledLevel(LedPattern pattern, hal::Nanoseconds since) {
+    if (since < 0)
+        since = 0;
+    switch (pattern) {
+    case LedPattern::On:
+        return true;
+    case LedPattern::Heartbeat:
+        return square(since, 2000 * kMs, 100 * kMs);
+    case LedPattern::Blink:
+        return square(since, 500 * kMs, 250 * kMs);
+    case LedPattern::FastBlink:
+        return square(since, 125 * kMs, 62 * kMs);
+    case LedPattern::Confirm: {
+        // Two 80 ms flashes 160 ms apart, every 500 ms, three times.
+        if (since >= patternDuration(LedPattern::Confirm))
+            return false;
+        const hal::Nanoseconds phase = since % (500 * kMs);
+        return phase < 80 * kMs || (phase >= 160 * kMs && phase < 240 * kMs);
+    }
+    }
+    return false;
+}
+
+hal::Nanoseconds patternDuration(LedPattern pattern) {
+    return pattern == LedPattern::Confirm ? 1500 * kMs : 0;
+}
+
+} // namespace edgetrack::app

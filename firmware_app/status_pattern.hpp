@@ -1,0 +1,29 @@
+// What the status LED shows in each state of the board, as a function of time.
+#pragma once
+
+#include "hal/types.hpp"
+
+namespace edgetrack::app {
+
+/// \brief Blink patterns, each readable at a glance and distinct from the others.
+enum class LedPattern {
+    /// Tracking, at least one body found: steadily on.
+    On,
+    /// Tracking, nothing found (or no models yet): a 100 ms flash every 2 s, a heartbeat.
+    Heartbeat,
+    /// Calibrating: 2 Hz, half on.
+    Blink,
+    /// Degraded (a camera or the flash failed): 8 Hz.
+    FastBlink,
+    /// Acknowledges a long press (models deleted): three double flashes in 1.5 s, then the
+    /// state's own pattern.
+    Confirm,
+};
+
+/// \return whether the LED is lit \a since after the pattern started.
+bool ledLevel(LedPattern pattern, hal::Nanoseconds since);
+
+/// \brief How long a one-shot pattern lasts (0 for the continuing ones).
+hal::Nanoseconds patternDuration(LedPattern pattern);
+
+} // namespace edgetrack::app

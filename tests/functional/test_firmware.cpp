@@ -1,0 +1,495 @@
+// Functional tests of the firmware on the simulated board: button calibration, flash, outputs.
+#include <algorithm>
+#include <arpa/inet.h>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <netinet/in.h>
+#include <optional>
+#include <set>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include "firmware_app/firmware.hpp"
+#include "firmware_app/output/dtrack.hpp"
+#include "hal/linux/posix_udp_sender.hpp"
+#include "hal/sim/scene.hpp"
+#include "hal/sim/sim_board.hpp"
+#include "tests/support/alloc_guard.hpp"
+#include "tests/support/dbc.hpp"
+#include "tests/support/sim_models.hpp"
+
+namespace edgetrack::app {
+namespace {
+
+constexpr hal::Nanoseconds kMs = hal::kNanosecondsPerMillisecond;
+
+std::unique_ptr<sim::SimBoard> makeBoard(const char* scene, std::uint64_t seed) {
+    std::optional<sim::Scene> s = sim::makeScene(scene, seed);
+    EXPECT_TRUE(s.has_value());
+    return std::make_unique<sim::SimBoard>(std::move(*s), seed);
+}
+
+/// The scene's true layouts as a model set, as `--models` would load them.
+std::vector<NamedModel> truthSet(const sim::SimBoard& board) {
+    std::vector<NamedModel> set;
+    for (MarkerModel& m : test::truthModels(board.world.scene()))
+        set.push_back({std::move(m), "truth"});
+    return set;
+}
+
+std::vector<NamedModel> copySet(const std::vector<NamedModel>& set) {
+    std::vector<NamedModel> copy;
+    for (const NamedModel& m : set) {
+        MarkerModel model(m.model.markers_model_mm.size());
+        model.assign(m.model);
+        copy.push_back({std::move(model), m.name});
+    }
+    return copy;
+}
+
+/// A UDP socket on 127.0.0.1 that collects what the firmware sends.
+class LoopbackReceiver {
+public:
+    LoopbackReceiver() {
+        fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK, 0);
+        sockaddr_in address{};
+        address.sin_family = AF_INET;
+        address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+        int size = 8 << 20;
+        ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, sizeof size);
+        EXPECT_EQ(::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+        socklen_t length = sizeof address;
+        ::getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length);
+        port_ = ntohs(address.sin_port);
+    }
+    ~LoopbackReceiver() { ::close(fd_); }
+
+    hal::UdpEndpoint endpoint() const { return {{127, 0, 0, 1}, port_}; }
+
+    /// \brief Every datagram received so far, parsed as a DTrack client would.
+    std::vector<ParsedDtrack> drain() {
+        std::vector<ParsedDtrack> frames;
+        char buffer[65536];
+        while (true) {
+            const ssize_t n = ::recv(fd_, buffer, sizeof buffer, 0);
+            if (n <= 0)
+                break;
+            Result<ParsedDtrack> parsed =
+                parseDtrack(std::string_view(buffer, static_cast<std::size_t>(n)));
+            EXPECT_TRUE(parsed) << parsed.error().message;
+            if (parsed)
+                frames.push_back(std::move(*parsed));
+        }
+        return frames;
+    }
+
+private:
+    int fd_ = -1;
+    std::uint16_t port_ = 0;
+};
+
+void runFrames(Firmware& firmware, std::uint64_t frames) {
+    const std::uint64_t until = firmware.counters().framesProcessed + frames;
+    while (firmware.counters().framesProcessed < until)
+        firmware.step();
+}
+
+/// Per body, the pose relative to one object's true pose stays the same frame after frame.
+double worstOffsetSpread_mm(const std::vector<std::pair<RigidTransform, RigidTransform>>& pairs) {
+    if (pairs.empty())
+        return 1e9;
+    const RigidTransform first = pairs.front().second.inverse() * pairs.front().first;
+    double worst = 0.0;
+    for (const auto& [pose, truth] : pairs)
+        worst = std::max(worst,
+                         ((truth.inverse() * pose).translation_mm - first.translation_mm).norm());
+    return worst;
+}
+
+TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
+    auto sim = makeBoard("two_cubes", 7);
+    LoopbackReceiver receiver;
+    linux_hal::PosixUdpSender udp;
+    ASSERT_TRUE(udp.isValid());
+    hal::Board board{sim->clock,     sim->cameras, sim->ledRing, sim->button,
+                     sim->statusLed, sim->flash,   sim->can,     udp};
+    FirmwareConfig config;
+    config.udp.destinations = {receiver.endpoint()};
+    Firmware firmware(config, board, sim->world.rig());
+    ASSERT_TRUE(firmware.isValid()) << firmware.error();
+    firmware.start();
+    EXPECT_NE(firmware.flashReport().find("no models on flash: slot A empty, slot B empty"),
+              std::string::npos)
+        << firmware.flashReport();
+    runFrames(firmware, 20);
+    EXPECT_TRUE(firmware.ready());
+    EXPECT_EQ(firmware.state(), FirmwareState::Tracking);
+
+    // A short press (with contact bounce) starts the calibration; the status LED blinks.
+    sim->button.press(sim->clock.now(), 150 * kMs, 3);
+    runFrames(firmware, 30);
+    ASSERT_EQ(firmware.state(), FirmwareState::Calibrating) << firmware.lastEvent();
+    const std::uint64_t ledChanges = sim->statusLed.changes();
+    runFrames(firmware, 100);
+    EXPECT_GE(sim->statusLed.changes() - ledChanges, 3u) << "2 Hz blink over one second";
+    // The growing models go to the host as DTrack `3d` markers.
+    std::size_t previewMarkers = 0;
+    for (const ParsedDtrack& frame : receiver.drain())
+        previewMarkers = std::max(previewMarkers, frame.markers.size());
+
+    // The user turns the cubes until the models settle; the calibration then ends on its own.
+    while (firmware.state() == FirmwareState::Calibrating)
+        firmware.step();
+    for (const ParsedDtrack& frame : receiver.drain())
+        previewMarkers = std::max(previewMarkers, frame.markers.size());
+    EXPECT_GE(previewMarkers, 10u);
+    ASSERT_EQ(firmware.models().size(), 2u) << firmware.lastEvent();
+    EXPECT_NE(firmware.lastEvent().find("ended by the models settled after"), std::string::npos)
+        << firmware.lastEvent();
+    std::cout << "[          ] " << firmware.lastEvent() << "\n";
+    EXPECT_NE(firmware.lastEvent().find("2 new, 0 updated; 2 models, saved to flash"),
+              std::string::npos)
+        << firmware.lastEvent();
+    EXPECT_EQ(firmware.counters().calibrationsSaved, 1u);
+    ModelStore store(sim->flash, MarkerSet::kCapacity);
+    Result<StoredModels> stored = store.load();
+    ASSERT_TRUE(stored) << stored.error().message;
+    EXPECT_EQ(stored->models.size(), 2u);
+
+    // Tracking resumes with the new models: DTrack frames with both bodies arrive and parse.
+    std::map<std::uint64_t, std::vector<RigidTransform>> truthByFrame;
+    for (int f = 0; f < 400; ++f) {
+        firmware.step();
+        truthByFrame[firmware.lastFrame()] = sim->cameras.lastObservation().objectPoses;
+    }
+    const std::vector<ParsedDtrack> frames = receiver.drain();
+    ASSERT_GE(frames.size(), 390u) << "loopback UDP loses nothing";
+    std::size_t withBoth = 0;
+    std::map<std::uint32_t, std::array<std::vector<std::pair<RigidTransform, RigidTransform>>, 2>>
+        byBodyAndObject;
+    for (const ParsedDtrack& frame : frames) {
+        EXPECT_EQ(frame.calibrated, 2u);
+        ASSERT_TRUE(frame.latency_s.has_value());
+        EXPECT_GT(*frame.latency_s, 0.0);
+        EXPECT_LT(*frame.latency_s, 0.05);
+        withBoth += frame.bodies.size() == 2 ? 1u : 0u;
+        const auto truth = truthByFrame.find(frame.frame);
+        if (truth == truthByFrame.end())
+            continue;
+        for (const DtrackBody& body : frame.bodies)
+            for (std::size_t object = 0; object < 2; ++object)
+                byBodyAndObject[body.id][object].push_back(
+                    {body.T_rig_from_model, truth->second[object]});
+    }
+    EXPECT_GE(withBoth, frames.size() * 8 / 10) << "both cubes in most frames";
+    // Each body is one cube: its pose is a fixed offset from that cube's true pose.
+    ASSERT_EQ(byBodyAndObject.size(), 2u);
+    std::set<std::size_t> objectsMatched;
+    for (const auto& [id, perObject] : byBodyAndObject) {
+        const double spread0 = worstOffsetSpread_mm(perObject[0]);
+        const double spread1 = worstOffsetSpread_mm(perObject[1]);
+        EXPECT_LT(std::min(spread0, spread1), 1.0) << "body " << id;
+        objectsMatched.insert(spread0 < spread1 ? 0u : 1u);
+    }
+    EXPECT_EQ(objectsMatched.size(), 2u) << "the two bodies are the two cubes";
+    EXPECT_EQ(sim->statusLed.isOn(), true) << "steady on while bodies are tracked";
+}
+
+TEST(FirmwareOnSimBoard, ASecondPressEndsTheCalibrationAndAnEmptyOneKeepsTheModels) {
+    auto sim = makeBoard("two_cubes", 3);
+    hal::Board& board = sim->board;
+    Firmware firmware(FirmwareConfig{}, board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    sim->button.press(sim->clock.now(), 100 * kMs);
+    runFrames(firmware, 20);
+    ASSERT_EQ(firmware.state(), FirmwareState::Calibrating);
+    // Ended after 0.3 s, before any object is established: nothing learnt, old models stay.
+    sim->button.press(sim->clock.now(), 100 * kMs);
+    runFrames(firmware, 20);
+    EXPECT_EQ(firmware.state(), FirmwareState::Tracking);
+    EXPECT_NE(firmware.lastEvent().find("ended by the button after 0."), std::string::npos)
+        << firmware.lastEvent();
+    EXPECT_NE(firmware.lastEvent().find(": no object learnt; models unchanged"), std::string::npos)
+        << firmware.lastEvent();
+    EXPECT_EQ(firmware.models().size(), 2u);
+    runFrames(firmware, 50);
+    EXPECT_EQ(firmware.bodies().size(), 2u);
+    EXPECT_TRUE(firmware.bodies()[0].found() || firmware.bodies()[1].found());
+}
+
+TEST(FirmwareOnSimBoard, ALongPressDeletesAllModelsWithAConfirmationPattern) {
+    auto sim = makeBoard("two_cubes", 3);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    runFrames(firmware, 20);
+    const hal::Nanoseconds pressed = sim->clock.now();
+    sim->button.press(pressed, 3500 * kMs);
+    // The deletion happens once the press has lasted 3 s, while the button is still held.
+    while (sim->clock.now() < pressed + 3100 * kMs)
+        firmware.step();
+    EXPECT_EQ(firmware.models().size(), 0u);
+    EXPECT_EQ(firmware.counters().modelDeletions, 1u);
+    const std::uint64_t changes = sim->statusLed.changes();
+    while (sim->clock.now() < pressed + 4500 * kMs)
+        firmware.step();
+    EXPECT_GE(sim->statusLed.changes() - changes, 10u) << "three double flashes";
+    EXPECT_EQ(firmware.state(), FirmwareState::Tracking) << "no short press on release";
+    // After a restart the flash holds no models either.
+    Firmware restarted(FirmwareConfig{}, sim->board, sim->world.rig());
+    restarted.start();
+    EXPECT_EQ(restarted.models().size(), 0u);
+    EXPECT_NE(restarted.flashReport().find("loaded 0 models"), std::string::npos)
+        << restarted.flashReport();
+}
+
+TEST(FirmwareOnSimBoard, APowerCutAtEveryWriteOfAModelSaveLeavesTheOldOrTheNewModels) {
+    auto sim = makeBoard("two_cubes", 3);
+    const std::vector<NamedModel> full = truthSet(*sim);
+    ASSERT_EQ(full.size(), 2u);
+    {
+        std::vector<NamedModel> oldSet = copySet(full);
+        oldSet.pop_back();
+        Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+        firmware.start();
+        ASSERT_TRUE(firmware.replaceModels(std::move(oldSet)));
+    }
+    // How many flash operations one save takes.
+    const std::vector<std::uint8_t> before = sim->flash.contents();
+    const std::uint64_t start = sim->flash.operations();
+    {
+        Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+        firmware.start();
+        ASSERT_TRUE(firmware.replaceModels(copySet(full)));
+    }
+    const std::uint64_t operations = sim->flash.operations() - start;
+    ASSERT_GE(operations, 3u);
+    // Half of the cut operation lands (test_model_store also cuts with none and all landed).
+    for (std::uint64_t cut = 0; cut < operations; ++cut) {
+        for (double torn : {0.5}) {
+            sim->flash.contents() = before;
+            sim->flash.cutPowerAfter(cut, torn);
+            {
+                Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+                firmware.start();
+                EXPECT_FALSE(firmware.replaceModels(copySet(full))) << "cut at " << cut;
+            }
+            sim->flash.restorePower();
+            Firmware restarted(FirmwareConfig{}, sim->board, sim->world.rig());
+            restarted.start();
+            const std::size_t count = restarted.models().size();
+            EXPECT_TRUE(count == 1 || count == 2)
+                << "cut at operation " << cut << " (" << torn << " landed): " << count
+                << " models; " << restarted.flashReport();
+        }
+    }
+}
+
+TEST(FirmwareOnSimBoard, BothSlotsCorruptStartsWithNoModelsAndSaysWhy) {
+    auto sim = makeBoard("two_cubes", 3);
+    {
+        Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+        firmware.start();
+        ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+        ASSERT_TRUE(firmware.replaceModels(truthSet(*sim))); // both slots hold a set
+    }
+    const std::size_t half = sim->flash.size() / 2;
+    sim->flash.contents()[40] ^= 0x5A;        // slot A's payload
+    sim->flash.contents()[half + 10] ^= 0x01; // slot B's header
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    EXPECT_EQ(firmware.models().size(), 0u);
+    EXPECT_NE(firmware.flashReport().find("slot A corrupt"), std::string::npos)
+        << firmware.flashReport();
+    EXPECT_NE(firmware.flashReport().find("slot B corrupt"), std::string::npos)
+        << firmware.flashReport();
+    runFrames(firmware, 10);
+    EXPECT_EQ(firmware.state(), FirmwareState::Tracking);
+    EXPECT_TRUE(firmware.ready());
+    sim::SimUdpSender::Datagram datagram;
+    ASSERT_TRUE(sim->udp.takeSent(datagram));
+    Result<ParsedDtrack> parsed = parseDtrack(datagram.text());
+    ASSERT_TRUE(parsed) << parsed.error().message;
+    EXPECT_EQ(parsed->calibrated, 0u);
+    EXPECT_TRUE(parsed->bodies.empty());
+}
+
+/// Decoded CAN poses of one frame number, by body.
+struct CanBody {
+    bool found = false;
+    Vec3 position_mm = Vec3::Zero();
+    Quat rotation = Quat::Identity();
+};
+
+void expectCanMatchesUdp(bool fd) {
+    auto sim = makeBoard("two_cubes", 4);
+    FirmwareConfig config;
+    config.can.enabled = true;
+    config.can.fd = fd;
+    Firmware firmware(config, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    const std::map<std::uint32_t, test::DbcMessage> dbc =
+        test::readDbc(test::readText(test::deployedDbc()));
+    std::size_t compared = 0;
+    for (int f = 0; f < 200; ++f) {
+        firmware.step();
+        sim::SimUdpSender::Datagram datagram;
+        ParsedDtrack udpFrame;
+        while (sim->udp.takeSent(datagram)) {
+            Result<ParsedDtrack> parsed = parseDtrack(datagram.text());
+            ASSERT_TRUE(parsed) << parsed.error().message;
+            udpFrame = *parsed;
+        }
+        std::map<std::uint32_t, std::map<std::string, double>> signals;
+        hal::CanFrame frame;
+        while (sim->can.peerReceive(frame)) {
+            const auto message = dbc.find(frame.id);
+            ASSERT_NE(message, dbc.end()) << "frame 0x" << std::hex << frame.id << " not in DBC";
+            EXPECT_EQ(message->second.fd, frame.fd);
+            const std::uint32_t body =
+                fd ? frame.id - 0x380 : (frame.id - 0x300) / 3; // default layout
+            for (const auto& [name, value] : test::decode(message->second, frame))
+                signals[body][name] = value;
+        }
+        for (const DtrackBody& body : udpFrame.bodies) {
+            ASSERT_TRUE(signals.contains(body.id)) << "body " << body.id << " not on CAN";
+            std::map<std::string, double>& s = signals[body.id];
+            EXPECT_EQ(s["Found"], 1.0);
+            if (fd)
+                EXPECT_EQ(static_cast<std::uint64_t>(s["FrameNumber"]), udpFrame.frame);
+            else
+                EXPECT_EQ(static_cast<std::uint64_t>(s["Counter"]), udpFrame.frame % 16);
+            const Vec3 canPosition(s["PositionX"], s["PositionY"], s["PositionZ"]);
+            EXPECT_LT((canPosition - body.T_rig_from_model.translation_mm).norm(),
+                      fd ? 0.002 : 0.02);
+            const Quat q(s["QuatW"], s["QuatX"], s["QuatY"], s["QuatZ"]);
+            EXPECT_LT(rotationAngleBetween_rad(q.normalized(), body.T_rig_from_model.rotation),
+                      fd ? 1e-4 : 3e-4);
+            ++compared;
+        }
+        for (std::uint32_t id = 0; id < 2; ++id) {
+            const bool onUdp = std::any_of(udpFrame.bodies.begin(), udpFrame.bodies.end(),
+                                           [&](const DtrackBody& b) { return b.id == id; });
+            ASSERT_TRUE(signals.contains(id)) << "a lost body still sends its status";
+            EXPECT_EQ(signals[id]["Found"], onUdp ? 1.0 : 0.0);
+        }
+    }
+    EXPECT_GE(compared, 300u);
+}
+
+TEST(FirmwareOnSimBoard, ClassicCanFramesDecodeToTheUdpPoses) {
+    expectCanMatchesUdp(false);
+}
+
+TEST(FirmwareOnSimBoard, CanFdFramesDecodeToTheUdpPoses) {
+    expectCanMatchesUdp(true);
+}
+
+// The issue asks for 10,000 frames; the sanitizer and qemu builds run a fifth of them, as the
+// simulated cameras' rendering dominates there.
+#ifdef EDGETRACK_SLOW_TARGET
+constexpr int kGuardedFrames = 2000;
+#else
+constexpr int kGuardedFrames = 10000;
+#endif
+
+TEST(FirmwareOnSimBoard, NoHeapAllocationPerFrame) {
+    auto sim = makeBoard("two_cubes", 5);
+    FirmwareConfig config;
+    config.can.enabled = true;
+    Firmware firmware(config, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    runFrames(firmware, 300); // warm-up: every vector reaches its working size
+    hal::CanFrame frame;
+    sim::SimUdpSender::Datagram datagram;
+    test::AllocationGuard guard;
+    for (int f = 0; f < kGuardedFrames; ++f) {
+        firmware.step();
+        while (sim->can.peerReceive(frame)) {
+        }
+        while (sim->udp.takeSent(datagram)) {
+        }
+    }
+    EXPECT_EQ(guard.allocations(), 0u);
+    EXPECT_EQ(firmware.counters().framesProcessed, 300u + kGuardedFrames);
+    EXPECT_GE(firmware.counters().udpSent, 300u + kGuardedFrames);
+    EXPECT_GE(firmware.counters().canSent, 2u * kGuardedFrames);
+}
+
+TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
+    auto sim = makeBoard("two_cubes", 6);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    runFrames(firmware, 100);
+    sim->cameras.setSpuriousBurst(500);
+    runFrames(firmware, 100);
+    sim->cameras.setSpuriousBurst(0);
+    // 500 reflections per image against 256 blobs kept: the rest are counted, not stored. (The
+    // detector keeps blobs from the top of the image down, so markers low in the image are lost
+    // during such a burst; bench_firmware measures what the burst costs.)
+    EXPECT_GE(firmware.counters().blobOverflow, 100u * 2u * 200u);
+    EXPECT_EQ(firmware.counters().framesProcessed, 200u) << "no frame lost to the burst";
+    EXPECT_EQ(firmware.counters().framesDroppedQueue, 0u);
+    // Once the burst is over the cubes are found again within a few frames.
+    runFrames(firmware, 20);
+    EXPECT_TRUE(firmware.bodies()[0].found() && firmware.bodies()[1].found());
+}
+
+TEST(FirmwareOnSimBoard, CamerasThatStopPutTheBoardInTheDegradedStateUntilTheyReturn) {
+    auto sim = makeBoard("two_cubes", 3);
+    FirmwareConfig config;
+    Firmware firmware(config, sim->board, sim->world.rig());
+    firmware.start();
+    runFrames(firmware, 20);
+    sim->cameras.setStalled(true);
+    const hal::Nanoseconds stalled = sim->clock.now();
+    while (firmware.state() != FirmwareState::Degraded &&
+           sim->clock.now() < stalled + 2 * hal::kNanosecondsPerSecond)
+        firmware.step();
+    ASSERT_EQ(firmware.state(), FirmwareState::Degraded);
+    EXPECT_FALSE(firmware.ready());
+    EXPECT_NE(firmware.lastEvent().find("no frames from the cameras"), std::string::npos)
+        << firmware.lastEvent();
+    // Still stalled: the retries fail and the board stays degraded, blinking fast.
+    const std::uint64_t changes = sim->statusLed.changes();
+    while (sim->clock.now() < stalled + 3 * hal::kNanosecondsPerSecond)
+        firmware.step();
+    EXPECT_GE(sim->statusLed.changes() - changes, 8u);
+    EXPECT_GE(firmware.counters().cameraRestarts, 1u);
+    sim->cameras.setStalled(false);
+    while (firmware.state() != FirmwareState::Tracking &&
+           sim->clock.now() < stalled + 6 * hal::kNanosecondsPerSecond)
+        firmware.step();
+    ASSERT_EQ(firmware.state(), FirmwareState::Tracking) << firmware.lastEvent();
+    const std::uint64_t processed = firmware.counters().framesProcessed;
+    runFrames(firmware, 10);
+    EXPECT_EQ(firmware.counters().framesProcessed, processed + 10);
+    EXPECT_TRUE(firmware.ready());
+}
+
+TEST(FirmwareOnSimBoard, TheStrobeLightsEveryExposureAndOnlyThen) {
+    auto sim = makeBoard("two_cubes", 3);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    runFrames(firmware, 5);
+    EXPECT_FALSE(sim->ledRing.continuous()) << "pulses once the exposure timing is known";
+    for (int f = 0; f < 50; ++f) {
+        firmware.step();
+        const hal::Nanoseconds next = sim->cameras.nextExposureStart();
+        const hal::Nanoseconds exposure = sim->cameras.exposureDuration();
+        EXPECT_DOUBLE_EQ(sim->ledRing.litFraction(next, next + exposure), 1.0);
+        EXPECT_DOUBLE_EQ(sim->ledRing.litFraction(next - 4 * kMs, next - 1 * kMs), 0.0)
+            << "dark between exposures";
+    }
+    EXPECT_EQ(firmware.counters().strobePulsesRefused, 0u);
+}
+
+} // namespace
+} // namespace edgetrack::app
