@@ -26,6 +26,8 @@ struct BlobDetectorConfig {
     std::size_t maxBlobs = 256;
     /// Connected-component labels per image; a flood of specks beyond this is counted, not stored.
     std::size_t maxLabels = 4096;
+
+    bool operator==(const BlobDetectorConfig&) const = default;
 };
 
 /// \brief A detected blob: centre in raw pixels of its camera, with (0, 0) the top-left pixel.

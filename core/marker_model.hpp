@@ -58,6 +58,8 @@ struct SminConfig {
     double sameShapeShare = 0.8;
     /// S_min is never below this: with three markers, one spurious point can complete a false fit.
     std::uint32_t floor = 4;
+
+    bool operator==(const SminConfig&) const = default;
 };
 
 /**

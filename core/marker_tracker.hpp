@@ -24,6 +24,8 @@ struct FrameToFrameConfig {
     double maxPredictionGap_s = 0.1;
     /// Markers tracked at once; more are counted as overflow.
     std::size_t maxMarkers = 256;
+
+    bool operator==(const FrameToFrameConfig&) const = default;
 };
 
 /// \brief A marker with its identity: ID stays constant while the marker is seen frame after frame.

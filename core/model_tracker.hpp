@@ -23,8 +23,8 @@ struct ModelTrackingConfig {
     /// The paper used 4 mm; the simulated rig's distances are good to 0.1 mm, and each halving of
     /// the tolerance halves the candidates of a search (a quarter of its pair checks). Models
     /// from `calibrate` carry an S_min found at 2 mm, which stays safe at any smaller tolerance.
-    double distanceTolerance_mm =
-        1.0; /// A data point this close to a model marker placed by a pose is that marker (mm).
+    double distanceTolerance_mm = 1.0;
+    /// A data point this close to a model marker placed by a pose is that marker (mm).
     double matchRadius_mm = 2.0;
     /// When a pose's residual exceeds half its residual gate (below), the match that lies
     /// outlierFactor times the RMS of the others (and at least outlierFloor_mm) away from their
@@ -39,8 +39,8 @@ struct ModelTrackingConfig {
     /// rigs (real Vicon data fits at 0.25 mm, the simulated rig at 0.06 mm).
     double maxRms_mm = 1.0;
     double rmsGateFactor = 4.0;
-    double rmsGateFloor_mm =
-        0.25; /// Around a predicted marker, the first association looks this far (mm): it covers a
+    double rmsGateFloor_mm = 0.25;
+    /// Around a predicted marker, the first association looks this far (mm): it covers a
     /// prediction that is off by an unforeseen acceleration between two frames.
     double predictionRadius_mm = 12.0;
     /// A body is predicted from its last poses for this long after it was last found (s); after
@@ -60,6 +60,8 @@ struct ModelTrackingConfig {
     /// Candidate pair checks per frame over all searches: what a flood of spurious points may
     /// cost. Searches past it are skipped and counted.
     std::uint64_t searchBudget = 200000;
+
+    bool operator==(const ModelTrackingConfig&) const = default;
 };
 
 /// \brief How a body was found in the last frame.

@@ -46,6 +46,8 @@ struct CalibrationConfig {
     std::size_t maxCliques = 512;
     std::size_t cliqueStepBudget = 50000;
     SminConfig smin{};
+
+    bool operator==(const CalibrationConfig&) const = default;
 };
 
 /// \brief What calibration did and what did not fit, for the status view and the summary.

@@ -22,6 +22,8 @@ struct PoseFilterConfig {
     double predictAhead_s = 0.0;
     /// A body unseen for longer than this starts afresh from its next measurement (s).
     double resetAfter_s = 0.1;
+
+    bool operator==(const PoseFilterConfig&) const = default;
 };
 
 /**

@@ -34,6 +34,8 @@ struct StereoConfig {
     double maxReprojection_px = 1.5;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
+
+    bool operator==(const StereoConfig&) const = default;
 };
 
 /// \brief A triangulated marker and the blobs it came from.

@@ -40,6 +40,8 @@ struct CameraSettings {
     double retry_s = 1.0;
     /// The stereo calibration (INTERFACES §2); empty on the simulated board (the scene's rig).
     std::filesystem::path rigFile;
+
+    bool operator==(const CameraSettings&) const = default;
 };
 
 /// \brief GPIO lines (libgpiod names) and the LED strobe timing.
@@ -56,6 +58,8 @@ struct GpioSettings {
     double debounce_ms = 30.0;
     /// A press held this long is a long press (delete all models).
     double longPress_s = 3.0;
+
+    bool operator==(const GpioSettings&) const = default;
 };
 
 /// \brief When a field calibration ends on its own.
@@ -68,6 +72,8 @@ struct CalibrationSessionSettings {
     double maxDuration_s = 120.0;
     /// The growing models are sent to the host (DTrack `3d` lines) this often.
     double previewRate_hz = 10.0;
+
+    bool operator==(const CalibrationSessionSettings&) const = default;
 };
 
 /// \brief DTrack UDP output.
@@ -76,6 +82,8 @@ struct UdpSettings {
     std::vector<hal::UdpEndpoint> destinations{hal::UdpEndpoint{{127, 0, 0, 1}, 5000}};
     /// Each frame carries `etlat SECONDS`, the latency from mid-exposure to sending.
     bool latencyLine = true;
+
+    bool operator==(const UdpSettings&) const = default;
 };
 
 /// \brief CAN output.
@@ -87,6 +95,8 @@ struct CanSettings {
     std::uint32_t bitrate = 500000;
     std::uint32_t dataBitrate = 2000000;
     CanPoseLayout layout{};
+
+    bool operator==(const CanSettings&) const = default;
 };
 
 /// \brief The flash partition that keeps the models.
@@ -95,6 +105,8 @@ struct FlashSettings {
     std::filesystem::path device = "/var/lib/edgetrack/models.flash";
     std::size_t size_bytes = 1u << 20;
     std::size_t eraseBlock_bytes = 4096;
+
+    bool operator==(const FlashSettings&) const = default;
 };
 
 /// \brief Status reporting and the frame-time budget.
@@ -103,6 +115,8 @@ struct HealthSettings {
     double statusInterval_s = 1.0;
     /// A frame whose processing takes longer is counted as over budget (0: the frame period).
     double frameBudget_ms = 0.0;
+
+    bool operator==(const HealthSettings&) const = default;
 };
 
 /// \brief Everything `edgetrack run` needs, with defaults that suit the simulated rig.
@@ -121,6 +135,8 @@ struct FirmwareConfig {
     UdpSettings udp{};
     CanSettings can{};
     HealthSettings health{};
+
+    bool operator==(const FirmwareConfig&) const = default;
 };
 
 /**

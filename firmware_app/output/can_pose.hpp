@@ -22,6 +22,8 @@ struct CanPoseLayout {
     std::uint32_t classicBaseId = 0x300;
     std::uint32_t fdBaseId = 0x380;
     std::uint32_t maxBodies = 16;
+
+    bool operator==(const CanPoseLayout&) const = default;
 };
 
 /// \brief One body's pose in one frame, as it goes on the bus.
