@@ -146,20 +146,17 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
 
 } // namespace
 
-bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config) {
-    const std::size_t smaller = std::min(a.markers_model_mm.size(), b.markers_model_mm.size());
-    const std::size_t larger = std::max(a.markers_model_mm.size(), b.markers_model_mm.size());
-    if (smaller < 3 ||
-        static_cast<double>(smaller) < config.sameShapeShare * static_cast<double>(larger))
-        return false;
+namespace {
+
+/// Whether a rigid transform puts at least \a needed of a's markers onto b's, tried from a's
+/// widest co-visible triangles: copies and parts share almost every triangle, so a few wide ones
+/// find the transform; a full congruence search (computeSmin) is far dearer.
+bool mapsOnto(const MarkerModel& a, const MarkerModel& b, double needed, double tol) {
     Adjacency adjA, adjB;
     buildAdjacency(a, adjA);
     buildAdjacency(b, adjB);
-    const double tol = config.tolerance_mm;
     const auto& pa = a.markers_model_mm;
     const auto& pb = b.markers_model_mm;
-    // Copies share almost every triangle, so a few of a's widest ones are enough to find the
-    // transform between them; a full congruence search (computeSmin) is far dearer.
     constexpr std::size_t kTriangles = 8;
     struct Triangle {
         std::size_t i, j, k;
@@ -185,9 +182,8 @@ bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& con
                     *smallest = t;
             });
         });
-    const double needed = config.sameShapeShare * static_cast<double>(smaller);
     for (const Triangle& t : widest) {
-        const bool copy = forEachCongruentTriangle(
+        const bool found = forEachCongruentTriangle(
             pa[t.i], pa[t.j], pa[t.k], pb.span(), adjB, tol,
             [&](std::size_t x, std::size_t y, std::size_t z) {
                 const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
@@ -196,10 +192,30 @@ bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& con
                 return fit && static_cast<double>(
                                   countCongruent(a, b, fit->transform, tol * tol)) >= needed;
             });
-        if (copy)
+        if (found)
             return true;
     }
     return false;
+}
+
+} // namespace
+
+bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config) {
+    const std::size_t smaller = std::min(a.markers_model_mm.size(), b.markers_model_mm.size());
+    const std::size_t larger = std::max(a.markers_model_mm.size(), b.markers_model_mm.size());
+    if (smaller < 3 ||
+        static_cast<double>(smaller) < config.sameShapeShare * static_cast<double>(larger))
+        return false;
+    return mapsOnto(a, b, config.sameShapeShare * static_cast<double>(smaller),
+                    config.tolerance_mm);
+}
+
+bool isPartOf(const MarkerModel& part, const MarkerModel& whole, const SminConfig& config) {
+    const std::size_t size = part.markers_model_mm.size();
+    if (size < 3 || size > whole.markers_model_mm.size())
+        return false;
+    return mapsOnto(part, whole, config.sameShapeShare * static_cast<double>(size),
+                    config.tolerance_mm);
 }
 
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {

@@ -86,6 +86,12 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config);
 bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config);
 
 /**
+ * \brief Whether \a part is a piece of \a whole's layout: a rigid transform puts at least
+ * config.sameShapeShare of part's markers onto markers of whole (within config.tolerance_mm).
+ */
+bool isPartOf(const MarkerModel& part, const MarkerModel& whole, const SminConfig& config);
+
+/**
  * \brief The canonical frame of a marker layout: origin at the centroid, axes along the principal
  * axes by decreasing spread, signs fixed by the third moments (so a layout gets the same frame
  * whatever frame it was measured in, unless its spread is isotropic).
