@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "core/marker_set.hpp"
+#include "firmware_app/model_merge.hpp"
 #include "firmware_app/output/can_pose.hpp"
 
 namespace edgetrack::app {
@@ -24,29 +25,15 @@ hal::Nanoseconds fromSeconds(double s) {
     return static_cast<hal::Nanoseconds>(std::llround(s * 1e9));
 }
 
-/// Strobe pulses are scheduled this many exposures ahead of the last delivered one.
-constexpr int kStrobeAhead = 2;
+/// Strobe pulses are scheduled this many exposures ahead of the last delivered one: a frame whose
+/// processing stalls the loop for up to this many periods still leaves every exposure lit.
+constexpr int kStrobeAhead = 4;
 /// The ring stays lit continuously for the first frames, until pulses cover the exposures.
 constexpr std::uint64_t kContinuousFrames = 2;
 /// Markers in one calibration preview (`3d` line); the datagram buffer holds them.
 constexpr std::size_t kMaxPreviewMarkers = 128;
 constexpr std::size_t kDatagramBytes = 8192;
 constexpr hal::Nanoseconds kDay = 86400 * hal::kNanosecondsPerSecond;
-
-/// Models own fixed-capacity storage and are move-only; copies are explicit.
-MarkerModel copyOf(const MarkerModel& model) {
-    MarkerModel copy(model.markers_model_mm.size());
-    copy.assign(model);
-    return copy;
-}
-
-std::vector<NamedModel> copyOf(std::span<const NamedModel> models) {
-    std::vector<NamedModel> copies;
-    copies.reserve(models.size());
-    for (const NamedModel& m : models)
-        copies.push_back({copyOf(m.model), m.name});
-    return copies;
-}
 
 } // namespace
 
@@ -257,51 +244,23 @@ void Firmware::finishCalibration(const char* why) {
              ": no object learnt; models unchanged");
         return;
     }
-    // A learnt object that has the layout of a known model replaces it under the known id, so
-    // a host's body numbers survive a recalibration; others take the lowest free id.
-    std::vector<NamedModel> merged = copyOf(models_);
-    std::vector<bool> replaced(merged.size(), false);
-    std::size_t added = 0;
-    std::size_t updated = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-        MarkerModel learnt = copyOf(learnt_[i]);
-        std::size_t match = merged.size();
-        for (std::size_t j = 0; j < merged.size() && match == merged.size(); ++j)
-            if (j < replaced.size() && !replaced[j] &&
-                sameShape(merged[j].model, learnt, config_.calibration.smin))
-                match = j;
-        if (match < merged.size()) {
-            learnt.id = merged[match].model.id;
-            merged[match].model = std::move(learnt);
-            replaced[match] = true;
-            ++updated;
-            continue;
-        }
-        if (merged.size() >= config_.maxModels) {
-            ++counters_.modelOverflow;
-            continue;
-        }
-        std::uint32_t id = 0;
-        while (std::any_of(merged.begin(), merged.end(),
-                           [&](const NamedModel& m) { return m.model.id == id; }))
-            ++id;
-        learnt.id = id;
-        merged.push_back({std::move(learnt), "body " + std::to_string(id)});
-        ++added;
-    }
-    // S_min holds against the whole set, old models included.
-    std::vector<MarkerModel> layouts;
-    for (const NamedModel& m : merged)
-        layouts.push_back(copyOf(m.model));
-    computeSmin(layouts, config_.calibration.smin);
-    for (std::size_t i = 0; i < merged.size(); ++i) {
-        merged[i].model.sMin = layouts[i].sMin;
-        merged[i].model.sameShapeAs = layouts[i].sameShapeAs;
-    }
+    MergedModels merge = mergeLearntModels(models_, std::span(learnt_).first(count),
+                                           config_.maxModels, config_.calibration.smin);
+    counters_.fragmentsDropped += merge.fragments;
+    counters_.modelOverflow += merge.refused;
+    std::vector<NamedModel>& merged = merge.models;
     const Status saved = store_.save(merged);
     std::string event = std::string("calibration ended by ") + why + lasted + ": " +
-                        std::to_string(added) + " new, " + std::to_string(updated) + " updated; " +
-                        std::to_string(merged.size()) + " models";
+                        std::to_string(merge.added) + " new, " + std::to_string(merge.updated) +
+                        " updated; " + std::to_string(merged.size()) + " models (";
+    for (std::size_t i = 0; i < merged.size(); ++i)
+        event += (i ? ", " : "") + std::to_string(merged[i].model.markers_model_mm.size());
+    event += " markers)";
+    if (merge.fragments > 0)
+        event += "; " + std::to_string(merge.fragments) + " fragment" +
+                 (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
+    if (merge.refused > 0)
+        event += "; " + std::to_string(merge.refused) + " refused (max_models)";
     if (saved) {
         ++counters_.calibrationsSaved;
         event += ", saved to flash";
@@ -714,6 +673,7 @@ std::string Firmware::statusReport() const {
     row("calibrations with no object", c.calibrationsEmpty);
     row("calibrations abandoned", c.calibrationsAbandoned);
     row("models refused (max_models)", c.modelOverflow);
+    row("learnt fragments dropped", c.fragmentsDropped);
     row("model deletions", c.modelDeletions);
     row("flash errors", c.flashErrors);
     return out;

@@ -82,6 +82,8 @@ struct FirmwareCounters {
     std::uint64_t calibrationsAbandoned = 0;
     /// Learnt models that did not fit max_models.
     std::uint64_t modelOverflow = 0;
+    /// Learnt objects whose layout is part of a body with more than twice their markers.
+    std::uint64_t fragmentsDropped = 0;
     std::uint64_t modelDeletions = 0;
     std::uint64_t flashErrors = 0;
 };
