@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 
 #include "firmware_app/calibrate_command.hpp"
+#include "firmware_app/model_command.hpp"
 #include "firmware_app/reconstruct_command.hpp"
 #include "firmware_app/recording/recording.hpp"
 #include "firmware_app/run_command.hpp"
@@ -60,11 +61,6 @@ CLI::Validator levelValidator(std::vector<std::string> allowed) {
             return "level must be one of " + names;
         },
         names, "LEVEL");
-}
-
-int notBuilt(std::ostream& err, const char* command, int issue) {
-    err << "edgetrack " << command << ": not built yet (issue " << issue << ")\n";
-    return kExitNotBuilt;
 }
 
 } // namespace
@@ -122,10 +118,34 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     trackCommand->add_option("--from", track.from, "Level to start from")
         ->check(levelValidator({"images", "blobs", "points"}));
 
-    CLI::App* modelCommand = app.add_subcommand("model", "Inspect and convert stored models");
+    CLI::App* modelCommand =
+        app.add_subcommand("model", "List, show, export and import the models on flash");
     modelCommand->require_subcommand(1);
-    for (const char* name : {"list", "show", "export", "import"})
-        modelCommand->add_subcommand(name, std::string(name) + " models")->allow_extras();
+    ModelCommandOptions model;
+    struct ModelAction {
+        const char* name;
+        const char* help;
+    };
+    std::vector<CLI::App*> modelActions;
+    for (const ModelAction& action :
+         {ModelAction{"list", "List the models on flash (or in --models DIR)"},
+          ModelAction{"show", "Show one model's markers (--id N)"},
+          ModelAction{"export", "Write the models on flash as model files (--out DIR)"},
+          ModelAction{"import", "Save the model files of --models DIR to flash"}}) {
+        CLI::App* sub = modelCommand->add_subcommand(action.name, action.help);
+        sub->add_option("--config", model.config,
+                        "Configuration whose [flash] names the partition");
+        sub->add_option("--flash", model.flash, "Flash partition file (default: [flash] device)");
+        const std::string name = action.name;
+        if (name != "export")
+            sub->add_option("--models", model.models, "Model directory")
+                ->required(name == "import");
+        if (name == "show")
+            sub->add_option("--id", model.id, "Model id")->required();
+        if (name == "export")
+            sub->add_option("--out", model.out, "Directory to write")->required();
+        modelActions.push_back(sub);
+    }
 
     try {
         app.parse(argc, argv);
@@ -216,8 +236,16 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         }
         return 0;
     }
-    if (modelCommand->parsed())
-        return notBuilt(err, "model", 7);
+    if (modelCommand->parsed()) {
+        for (CLI::App* action : modelActions)
+            if (action->parsed())
+                model.action = action->get_name();
+        if (Status s = runModelCommand(model, out); !s) {
+            err << "edgetrack model " << model.action << ": " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        return 0;
+    }
     return kExitUsage;
 }
 
