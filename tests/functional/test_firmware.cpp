@@ -391,10 +391,10 @@ TEST(FirmwareOnSimBoard, CanFdFramesDecodeToTheUdpPoses) {
     expectCanMatchesUdp(true);
 }
 
-// The issue asks for 10,000 frames; the sanitizer and qemu builds run a fifth of them, as the
+// The issue asks for 10,000 frames; the sanitizer and qemu builds run a tenth of them, as the
 // simulated cameras' rendering dominates there.
 #ifdef EDGETRACK_SLOW_TARGET
-constexpr int kGuardedFrames = 2000;
+constexpr int kGuardedFrames = 1000;
 #else
 constexpr int kGuardedFrames = 10000;
 #endif
