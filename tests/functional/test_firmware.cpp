@@ -319,6 +319,19 @@ TEST(FirmwareOnSimBoard, BothSlotsCorruptStartsWithNoModelsAndSaysWhy) {
     EXPECT_TRUE(parsed->bodies.empty());
 }
 
+// The issue asks for 10,000 frames under the allocation guard; the sanitizer and qemu builds run
+// a tenth of them, and fewer frames of the CAN and burst cases, as the simulated cameras'
+// rendering dominates there.
+#ifdef EDGETRACK_SLOW_TARGET
+constexpr int kGuardedFrames = 1000;
+constexpr int kCanFrames = 100;
+constexpr int kBurstFrames = 40;
+#else
+constexpr int kGuardedFrames = 10000;
+constexpr int kCanFrames = 200;
+constexpr int kBurstFrames = 100;
+#endif
+
 /// Decoded CAN poses of one frame number, by body.
 struct CanBody {
     bool found = false;
@@ -337,7 +350,7 @@ void expectCanMatchesUdp(bool fd) {
     const std::map<std::uint32_t, test::DbcMessage> dbc =
         test::readDbc(test::readText(test::deployedDbc()));
     std::size_t compared = 0;
-    for (int f = 0; f < 200; ++f) {
+    for (int f = 0; f < kCanFrames; ++f) {
         firmware.step();
         sim::SimUdpSender::Datagram datagram;
         ParsedDtrack udpFrame;
@@ -380,7 +393,7 @@ void expectCanMatchesUdp(bool fd) {
             EXPECT_EQ(signals[id]["Found"], onUdp ? 1.0 : 0.0);
         }
     }
-    EXPECT_GE(compared, 300u);
+    EXPECT_GE(compared, static_cast<std::size_t>(kCanFrames) * 3 / 2);
 }
 
 TEST(FirmwareOnSimBoard, ClassicCanFramesDecodeToTheUdpPoses) {
@@ -390,14 +403,6 @@ TEST(FirmwareOnSimBoard, ClassicCanFramesDecodeToTheUdpPoses) {
 TEST(FirmwareOnSimBoard, CanFdFramesDecodeToTheUdpPoses) {
     expectCanMatchesUdp(true);
 }
-
-// The issue asks for 10,000 frames; the sanitizer and qemu builds run a tenth of them, as the
-// simulated cameras' rendering dominates there.
-#ifdef EDGETRACK_SLOW_TARGET
-constexpr int kGuardedFrames = 1000;
-#else
-constexpr int kGuardedFrames = 10000;
-#endif
 
 TEST(FirmwareOnSimBoard, NoHeapAllocationPerFrame) {
     auto sim = makeBoard("two_cubes", 5);
@@ -430,13 +435,14 @@ TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
     ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
     runFrames(firmware, 100);
     sim->cameras.setSpuriousBurst(500);
-    runFrames(firmware, 100);
+    runFrames(firmware, kBurstFrames);
     sim->cameras.setSpuriousBurst(0);
     // 500 reflections per image against 256 blobs kept: the rest are counted, not stored. (The
     // detector keeps blobs from the top of the image down, so markers low in the image are lost
     // during such a burst; bench_firmware measures what the burst costs.)
-    EXPECT_GE(firmware.counters().blobOverflow, 100u * 2u * 200u);
-    EXPECT_EQ(firmware.counters().framesProcessed, 200u) << "no frame lost to the burst";
+    EXPECT_GE(firmware.counters().blobOverflow, kBurstFrames * 2u * 200u);
+    EXPECT_EQ(firmware.counters().framesProcessed, 100u + kBurstFrames)
+        << "no frame lost to the burst";
     EXPECT_EQ(firmware.counters().framesDroppedQueue, 0u);
     // Once the burst is over the cubes are found again within a few frames.
     runFrames(firmware, 20);
