@@ -7,11 +7,13 @@ find_package(Threads REQUIRED)
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(LIBSYSTEMD REQUIRED IMPORTED_TARGET libsystemd)
 
-# toml++ is used header-only, so the host's headers serve every target architecture.
+# toml++ from its headers, so the host's package serves every target architecture. Its
+# implementation is compiled once, in edgetrack_toml, not in every file that reads TOML (Debian's
+# shared libtomlplusplus is built with exceptions, which our code does not use).
 find_path(TOMLPLUSPLUS_INCLUDE_DIR toml++/toml.h REQUIRED)
-add_library(tomlplusplus_header_only INTERFACE)
-target_include_directories(tomlplusplus_header_only SYSTEM INTERFACE ${TOMLPLUSPLUS_INCLUDE_DIR})
-target_compile_definitions(tomlplusplus_header_only INTERFACE TOML_HEADER_ONLY=1 TOML_EXCEPTIONS=0)
+add_library(edgetrack_toml STATIC ${CMAKE_CURRENT_LIST_DIR}/toml_implementation.cpp)
+target_include_directories(edgetrack_toml SYSTEM PUBLIC ${TOMLPLUSPLUS_INCLUDE_DIR})
+target_compile_definitions(edgetrack_toml PUBLIC TOML_HEADER_ONLY=0 TOML_EXCEPTIONS=0)
 
 # nlohmann/json reads and writes the model files of INTERFACES §4 (offline tools only; the board
 # keeps models in its own binary format). Header-only like toml++.

@@ -12,6 +12,12 @@ constexpr std::size_t idx(int i) {
 }
 } // namespace
 
+const ProximityBlock& SlhSolver::orthogonalFactor(const ProximityBlock& proximity) {
+    svd_.compute(proximity, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    orthogonal_.noalias() = svd_.matrixU() * svd_.matrixV().transpose();
+    return orthogonal_;
+}
+
 BipartiteBlocks::BipartiteBlocks(std::size_t maxLeft, std::size_t maxRight)
     : maxLeft_(maxLeft)
     , maxRight_(maxRight)

@@ -88,9 +88,7 @@ public:
                 return;
             }
         }
-        svd_.compute(proximity, Eigen::ComputeThinU | Eigen::ComputeThinV);
-        orthogonal_.noalias() = svd_.matrixU() * svd_.matrixV().transpose();
-        acceptMutualMaxima(orthogonal_, proximity, minProximity, accept);
+        acceptMutualMaxima(orthogonalFactor(proximity), proximity, minProximity, accept);
     }
 
     /// \brief The fallback for oversized blocks: mutual maxima of the proximity itself.
@@ -100,6 +98,10 @@ public:
     }
 
 private:
+    /// \brief U V^T of the SVD G = U S V^T. Out of line so that one translation unit alone
+    /// instantiates Eigen's SVD (it dominated the build time of every user of this header).
+    const ProximityBlock& orthogonalFactor(const ProximityBlock& proximity);
+
     template <typename Score, typename Matrix, typename Accept>
     static void acceptMutualMaxima(const Score& score, const Matrix& proximity, double minProximity,
                                    Accept&& accept) {

@@ -2,10 +2,11 @@
 #include <cstdlib>
 #include <vector>
 
-#include <Eigen/Dense>
+#include <Eigen/Core>
 #include <gtest/gtest.h>
 
 #include "core/bounded_vector.hpp"
+#include "core/correspondence.hpp"
 #include "tests/support/alloc_guard.hpp"
 
 using edgetrack::test::AllocationGuard;
@@ -84,14 +85,15 @@ TEST(AllocationGuard, CountsEigenDynamicMatrices) {
 TEST(AllocationGuard, FixedSizeWorkDoesNotAllocate) {
     edgetrack::BoundedVector<double> preallocated(256);
     const auto count = countAllocations([&] {
-        Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 8, 8> bounded(6, 6);
-        bounded.setRandom();
-        Eigen::JacobiSVD<decltype(bounded)> svd(bounded, Eigen::ComputeFullU | Eigen::ComputeFullV);
-        for (int i = 0; i < 256; ++i)
-            preallocated.push_back(svd.singularValues()(i % 6));
+        // The correspondence SVD on a matrix of fixed maximum size, as every frame runs it.
+        edgetrack::ProximityBlock proximity(6, 5);
+        proximity.setRandom();
+        edgetrack::SlhSolver solver;
+        solver.solve(proximity.cwiseAbs(), 0.0,
+                     [&](int row, int) { preallocated.push_back(static_cast<double>(row)); });
     });
     EXPECT_EQ(count, 0u);
-    EXPECT_EQ(preallocated.size(), 256u);
+    EXPECT_GT(preallocated.size(), 0u);
 }
 
 TEST(AllocationGuard, CountsOnlyWhileArmed) {

@@ -128,7 +128,9 @@ TEST(RigFile, WrongNumberOfCameras) {
 }
 
 TEST(RigFile, TomlSyntaxErrorNamesTheLine) {
-    const std::string message = errorOf(std::string(kCamera0) + "\n[[camera]\nwidth = 1\n");
+    std::string text(kCamera0);
+    text += "\n[[camera]\nwidth = 1\n";
+    const std::string message = errorOf(text);
     EXPECT_EQ(message.rfind("rec/rig.toml:12: ", 0), 0u) << message;
 }
 

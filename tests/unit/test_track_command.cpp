@@ -47,9 +47,9 @@ TEST(PoseFile, RowsReadBackToTheirPrecision) {
 
 TEST(PoseFile, RefusesABadQuaternionWithItsLine) {
     test::TempDir dir;
-    const fs::path path = dir.write(
-        "poses.csv", std::string(kPoseCsvHeader) + "0,0,0,1,2,3,1,0,0,0,4,0.1\n1,0.01,0,1,2,3,0.5,"
-                                                   "0,0,0,4,0.1\n");
+    std::string text(kPoseCsvHeader);
+    text += "0,0,0,1,2,3,1,0,0,0,4,0.1\n1,0.01,0,1,2,3,0.5,0,0,0,4,0.1\n";
+    const fs::path path = dir.write("poses.csv", text);
     const Result<std::vector<PoseRow>> read = readPoses(path);
     ASSERT_FALSE(read);
     EXPECT_NE(read.error().message.find("poses.csv:3: quaternion is not unit"), std::string::npos)
