@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs edgetrack's build and test dependencies from Debian 12 packages (run as root).
 #
-#   toolchain/install-deps.sh            host build, tests and benchmarks
-#   toolchain/install-deps.sh aarch64    also the cross compiler, qemu-user and arm64 libraries
+#   toolchain/install-deps.sh               host build, tests and benchmarks
+#   toolchain/install-deps.sh aarch64       also the cross compiler, qemu-user and arm64 libraries
+#   toolchain/install-deps.sh aarch64 hil   also the hardware-test VM (tests/hil): qemu-system,
+#                                           Debian's kernel, its headers and sources, can-utils
 set -euo pipefail
 
 if [ "$(id -u)" -ne 0 ]; then
@@ -23,7 +25,32 @@ host_packages=(
 apt-get update -q
 apt_install "${host_packages[@]}"
 
-if [ "${1:-}" = "aarch64" ]; then
+want() {
+    local word
+    for word in "${requested[@]}"; do
+        [ "$word" = "$1" ] && return 0
+    done
+    return 1
+}
+requested=("$@")
+for word in "${requested[@]}"; do
+    case "$word" in
+    aarch64 | hil) ;;
+    *)
+        echo "install-deps.sh: unknown part '$word' (aarch64, hil)" >&2
+        exit 2
+        ;;
+    esac
+done
+
+if want hil; then
+    # The VM boots Debian's own kernel; gpio-sim and vimc are built from its sources against its
+    # headers (tests/hil/build-modules.sh), so image, headers and sources must be one version.
+    apt_install qemu-system-x86 linux-image-amd64 linux-headers-amd64 linux-source-6.1 \
+        busybox-static cpio kmod udev iproute2 can-utils xz-utils
+fi
+
+if want aarch64; then
     # Debian's multiarch arm64 -dev packages link the cross build; qemu-user runs its tests.
     if ! dpkg --print-foreign-architectures | grep -qx arm64; then
         dpkg --add-architecture arm64
