@@ -17,7 +17,7 @@ apt_install() { apt-get install -y -q --no-install-recommends "$@"; }
 host_packages=(
     build-essential cmake ninja-build pkg-config git clang-format
     libeigen3-dev libtomlplusplus-dev libcli11-dev libsimde-dev nlohmann-json3-dev
-    zlib1g-dev libsystemd-dev
+    zlib1g-dev libsystemd-dev libgpiod-dev
     libopencv-imgproc-dev
     libgtest-dev libgmock-dev libbenchmark-dev
 )
@@ -59,5 +59,5 @@ if want aarch64; then
     apt_install g++-aarch64-linux-gnu qemu-user \
         libc6:arm64 libstdc++6:arm64 \
         libgtest-dev:arm64 libgmock-dev:arm64 libbenchmark-dev:arm64 \
-        zlib1g-dev:arm64 libsystemd-dev:arm64
+        zlib1g-dev:arm64 libsystemd-dev:arm64 libgpiod-dev:arm64
 fi
