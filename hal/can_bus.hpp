@@ -29,6 +29,14 @@ constexpr bool isValidCanLength(std::uint8_t length, bool fd) {
            length == 48 || length == 64;
 }
 
+/// \return true for a frame any controller may send: identifier within 11 or 29 bits, a valid
+/// length, and the bit-rate switch only on FD frames.
+constexpr bool isValidCanFrame(const CanFrame& frame) {
+    const std::uint32_t maxId = frame.extended ? 0x1FFFFFFFu : 0x7FFu;
+    return frame.id <= maxId && isValidCanLength(frame.length, frame.fd) &&
+           (frame.fd || !frame.bitRateSwitch);
+}
+
 /// \brief Controller states of ISO 11898 error confinement, plus interface down.
 enum class CanState { ErrorActive, ErrorWarning, ErrorPassive, BusOff, Down };
 

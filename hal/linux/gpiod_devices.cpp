@@ -88,9 +88,10 @@ void GpiodLine::release() {
     chip_ = nullptr;
 }
 
-bool GpiodLine::retry() {
-    if (available())
-        return true;
+bool GpiodLine::retryIfDue(hal::Nanoseconds now) {
+    if (available() || now < nextRetry_)
+        return false;
+    nextRetry_ = now + kRetryInterval;
     release();
     return request();
 }
@@ -150,10 +151,7 @@ GpiodLedRing::~GpiodLedRing() {
 }
 
 void GpiodLedRing::retryIfDue(hal::Nanoseconds now) {
-    if (line_.available() || now < nextRetry_)
-        return;
-    nextRetry_ = now + kRetryInterval;
-    if (line_.retry())
+    if (line_.retryIfDue(now))
         line_.set(continuous_);
 }
 
@@ -251,14 +249,8 @@ GpiodButton::GpiodButton(const GpioLineAddress& address, const hal::Clock& clock
     , line_(address, GpiodLine::Direction::BothEdges, activeLow) {}
 
 bool GpiodButton::nextEdge(hal::ButtonEdge& edge) {
-    if (!line_.available()) {
-        const hal::Nanoseconds now = clock_.now();
-        if (now < nextRetry_)
-            return false;
-        nextRetry_ = now + kRetryInterval;
-        if (!line_.retry())
-            return false;
-    }
+    if (!line_.available() && !line_.retryIfDue(clock_.now()))
+        return false;
     return line_.readEdge(edge);
 }
 
@@ -268,11 +260,7 @@ GpiodStatusLed::GpiodStatusLed(const GpioLineAddress& address, const hal::Clock&
 
 void GpiodStatusLed::set(bool on) {
     if (!line_.available()) {
-        const hal::Nanoseconds now = clock_.now();
-        if (now < nextRetry_)
-            return;
-        nextRetry_ = now + kRetryInterval;
-        if (!line_.retry())
+        if (!line_.retryIfDue(clock_.now()))
             return;
         written_ = false;
     }

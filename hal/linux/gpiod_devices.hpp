@@ -29,9 +29,9 @@ struct GpioLineAddress {
  * \brief One GPIO line requested by edgetrack through libgpiod's v1 API (Debian 12 ships 1.6).
  *
  * A line that cannot be had now (no such chip or line, or EBUSY: another program holds it) leaves
- * the object unavailable with the reason in errorText(); retry() asks again, which the devices
- * below do at most once a second, so a line released by its other user is taken over without a
- * restart. The line is released in the destructor.
+ * the object unavailable with the reason in errorText(); retryIfDue() asks again at most once a
+ * second, so a line released by its other user is taken over without a restart. The line is
+ * released in the destructor.
  */
 class GpiodLine {
 public:
@@ -45,8 +45,9 @@ public:
     bool available() const { return line_ != nullptr; }
     /// \return why the line is unavailable (empty when it is available).
     const std::string& errorText() const { return errorText_; }
-    /// \brief Try to request the line again. \return available().
-    bool retry();
+    /// \brief Ask again for an unavailable line, at most once a second.
+    /// \return true when the line was unavailable and has just been taken.
+    bool retryIfDue(hal::Nanoseconds now);
 
     /// \brief Drive an output line (logical level). \return false when the write failed.
     bool set(bool on);
@@ -62,6 +63,7 @@ private:
     GpioLineAddress address_;
     Direction direction_;
     bool activeLow_;
+    hal::Nanoseconds nextRetry_ = 0;
     gpiod_chip* chip_ = nullptr;
     gpiod_line* line_ = nullptr;
     std::string errorText_;
@@ -112,6 +114,7 @@ private:
         hal::Nanoseconds onAt = 0, offAt = 0;
     };
     void run();
+    /// \brief Take the line again if it was lost and the retry is due; restore its level.
     void retryIfDue(hal::Nanoseconds now);
 
     const hal::Clock& clock_;
@@ -123,7 +126,6 @@ private:
     bool stopping_ = false;
     std::uint64_t dropped_ = 0;
     StrobeCounters counters_{};
-    hal::Nanoseconds nextRetry_ = 0;
     std::string schedulingNote_;
     std::thread thread_;
 };
@@ -147,7 +149,6 @@ public:
 private:
     const hal::Clock& clock_;
     GpiodLine line_;
-    hal::Nanoseconds nextRetry_ = 0;
 };
 
 /// \brief The status LED on an output line; writes only on a change of level.
@@ -165,7 +166,6 @@ private:
     GpiodLine line_;
     bool level_ = false;
     bool written_ = false;
-    hal::Nanoseconds nextRetry_ = 0;
 };
 
 } // namespace edgetrack::linux_hal

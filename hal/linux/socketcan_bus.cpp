@@ -102,10 +102,14 @@ SocketCanBus::WriteOutcome SocketCanBus::write(const hal::CanFrame& frame) {
     }
 }
 
-void SocketCanBus::goDown(bool gone) {
-    // Frames queued for a bus that went away are stale by the time it is back: drop them.
+void SocketCanBus::dropQueued() {
     counters_.droppedQueueFull += transmitQueue_.size();
     transmitQueue_.clear();
+}
+
+void SocketCanBus::goDown(bool gone) {
+    // Frames queued for a bus that went away are stale by the time it is back: drop them.
+    dropQueued();
     if (gone)
         close();
     setState(hal::CanState::Down, 0);
@@ -113,7 +117,8 @@ void SocketCanBus::goDown(bool gone) {
 
 void SocketCanBus::flushQueue() {
     while (!transmitQueue_.empty() && fd_ >= 0) {
-        switch (write(transmitQueue_.front())) {
+        const WriteOutcome outcome = write(transmitQueue_.front());
+        switch (outcome) {
         case WriteOutcome::Written:
             transmitQueue_.pop(scratch_);
             ++counters_.sent;
@@ -121,10 +126,8 @@ void SocketCanBus::flushQueue() {
         case WriteOutcome::Busy:
             return;
         case WriteOutcome::Down:
-            goDown(false);
-            return;
         case WriteOutcome::Gone:
-            goDown(true);
+            goDown(outcome == WriteOutcome::Gone);
             return;
         case WriteOutcome::Failed:
             transmitQueue_.pop(scratch_);
@@ -135,9 +138,7 @@ void SocketCanBus::flushQueue() {
 }
 
 hal::CanSendResult SocketCanBus::send(const hal::CanFrame& frame) {
-    const std::uint32_t maxId = frame.extended ? CAN_EFF_MASK : CAN_SFF_MASK;
-    if (frame.id > maxId || !hal::isValidCanLength(frame.length, frame.fd) ||
-        (frame.bitRateSwitch && !frame.fd) || (frame.fd && !config_.fd)) {
+    if (!hal::isValidCanFrame(frame) || (frame.fd && !config_.fd)) {
         ++counters_.refused;
         return hal::CanSendResult::Invalid;
     }
@@ -153,7 +154,8 @@ hal::CanSendResult SocketCanBus::send(const hal::CanFrame& frame) {
     }
     flushQueue();
     if (transmitQueue_.empty() && fd_ >= 0) {
-        switch (write(frame)) {
+        const WriteOutcome outcome = write(frame);
+        switch (outcome) {
         case WriteOutcome::Written:
             ++counters_.sent;
             if (state_ == hal::CanState::Down)
@@ -162,11 +164,8 @@ hal::CanSendResult SocketCanBus::send(const hal::CanFrame& frame) {
         case WriteOutcome::Busy:
             break;
         case WriteOutcome::Down:
-            goDown(false);
-            ++counters_.refused;
-            return hal::CanSendResult::Down;
         case WriteOutcome::Gone:
-            goDown(true);
+            goDown(outcome == WriteOutcome::Gone);
             ++counters_.refused;
             return hal::CanSendResult::Down;
         case WriteOutcome::Failed:
@@ -231,8 +230,7 @@ void SocketCanBus::handleErrorFrame(unsigned int canId, const unsigned char* dat
     if ((canId & CAN_ERR_BUSOFF) != 0) {
         next = hal::CanState::BusOff;
         // Nothing leaves a bus-off controller; what waits would be stale after the restart.
-        counters_.droppedQueueFull += transmitQueue_.size();
-        transmitQueue_.clear();
+        dropQueued();
     }
     setState(next, canId & CAN_ERR_MASK);
 }

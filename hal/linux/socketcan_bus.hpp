@@ -68,6 +68,8 @@ private:
     void drainSocket();
     void handleErrorFrame(unsigned int canId, const unsigned char* data);
     void setState(hal::CanState state, std::uint32_t errorClass);
+    /// \brief Drop every queued frame, counted as dropped.
+    void dropQueued();
     void goDown(bool gone);
 
     SocketCanConfig config_;

@@ -184,9 +184,7 @@ SimCanBus::SimCanBus(const hal::Clock& clock, std::size_t transmitQueueDepth,
     , errors_(64) {}
 
 hal::CanSendResult SimCanBus::send(const hal::CanFrame& frame) {
-    const std::uint32_t maxId = frame.extended ? 0x1FFFFFFFu : 0x7FFu;
-    if (frame.id > maxId || !hal::isValidCanLength(frame.length, frame.fd) ||
-        (frame.bitRateSwitch && !frame.fd)) {
+    if (!hal::isValidCanFrame(frame)) {
         ++counters_.refused;
         return hal::CanSendResult::Invalid;
     }

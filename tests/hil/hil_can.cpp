@@ -123,6 +123,16 @@ hal::CanSendResult sendUntilState(SocketCanBus& bus, const hal::CanFrame& frame,
     return result;
 }
 
+/// A frame sent once the interface is back is accepted, ends the Down state and reaches the bus.
+void expectSendingResumed(SocketCanBus& bus, const hal::CanFrame& frame) {
+    PeerSocket peer;
+    EXPECT_EQ(bus.send(frame), hal::CanSendResult::Queued);
+    EXPECT_EQ(bus.state(), hal::CanState::ErrorActive);
+    hal::CanFrame got;
+    ASSERT_TRUE(peer.read(got));
+    EXPECT_EQ(got.id, frame.id);
+}
+
 class SocketCan : public ::testing::Test {
 protected:
     void SetUp() override {
@@ -228,14 +238,9 @@ TEST_F(SocketCan, InterfaceDownIsReportedAndSendingResumesWhenItIsUp) {
     EXPECT_EQ(bus.send(frame), hal::CanSendResult::Down);
 
     shell(std::string("ip link set ") + kInterface + " up");
-    PeerSocket peer;
-    EXPECT_EQ(bus.send(frame), hal::CanSendResult::Queued);
-    EXPECT_EQ(bus.state(), hal::CanState::ErrorActive);
+    expectSendingResumed(bus, frame);
     ASSERT_TRUE(bus.nextError(event));
     EXPECT_EQ(event.state, hal::CanState::ErrorActive);
-    hal::CanFrame got;
-    ASSERT_TRUE(peer.read(got));
-    EXPECT_EQ(got.id, frame.id);
 }
 
 TEST_F(SocketCan, RemovedInterfaceIsReboundWhenItComesBack) {
@@ -249,12 +254,7 @@ TEST_F(SocketCan, RemovedInterfaceIsReboundWhenItComesBack) {
 
     shell(std::string("ip link add dev ") + kInterface + " type vcan && ip link set " + kInterface +
           " mtu 72 && ip link set " + kInterface + " up");
-    PeerSocket peer;
-    EXPECT_EQ(bus.send(frame), hal::CanSendResult::Queued);
-    EXPECT_EQ(bus.state(), hal::CanState::ErrorActive);
-    hal::CanFrame got;
-    ASSERT_TRUE(peer.read(got));
-    EXPECT_EQ(got.id, frame.id);
+    expectSendingResumed(bus, frame);
 }
 
 TEST_F(SocketCan, ErrorFramesDriveTheStateAndBusOffRefusesSendsUntilRestart) {
