@@ -54,6 +54,65 @@ echo 'obj-m := gpio-sim.o' > "$work/gpio_sim/Kbuild"
 
 mkdir -p "$work/vimc"
 cp "$work/$src/drivers/media/test-drivers/vimc/"*.[ch] "$work/vimc/"
+# vimc registers one platform device, so one camera. The board has two: register two devices
+# (vimc.0 and vimc.1, each its own media device and libcamera camera), either of which can be
+# unbound through sysfs to take that camera away.
+core="$work/vimc/vimc-core.c"
+grep -q '"platform:%s", VIMC_PDEV_NAME);' "$core"
+sed -i 's/"platform:%s", VIMC_PDEV_NAME);/"platform:%s", dev_name(\&pdev->dev));/' "$core"
+sed -i '/^static struct platform_device vimc_pdev = {/,$d' "$core"
+cat >> "$core" <<'EOF_VIMC'
+static struct platform_device vimc_pdevs[2] = {
+	{ .name = VIMC_PDEV_NAME, .id = 0, .dev.release = vimc_dev_release },
+	{ .name = VIMC_PDEV_NAME, .id = 1, .dev.release = vimc_dev_release },
+};
+
+static struct platform_driver vimc_pdrv = {
+	.probe		= vimc_probe,
+	.remove		= vimc_remove,
+	.driver		= {
+		.name	= VIMC_PDEV_NAME,
+	},
+};
+
+static int __init vimc_init(void)
+{
+	int ret;
+	int i;
+
+	for (i = 0; i < ARRAY_SIZE(vimc_pdevs); i++) {
+		ret = platform_device_register(&vimc_pdevs[i]);
+		if (ret) {
+			platform_device_put(&vimc_pdevs[i]);
+			while (--i >= 0)
+				platform_device_unregister(&vimc_pdevs[i]);
+			return ret;
+		}
+	}
+	ret = platform_driver_register(&vimc_pdrv);
+	if (ret) {
+		for (i = 0; i < ARRAY_SIZE(vimc_pdevs); i++)
+			platform_device_unregister(&vimc_pdevs[i]);
+		return ret;
+	}
+	return 0;
+}
+
+static void __exit vimc_exit(void)
+{
+	int i;
+
+	platform_driver_unregister(&vimc_pdrv);
+	for (i = 0; i < ARRAY_SIZE(vimc_pdevs); i++)
+		platform_device_unregister(&vimc_pdevs[i]);
+}
+
+module_init(vimc_init);
+module_exit(vimc_exit);
+
+MODULE_DESCRIPTION("Virtual Media Controller Driver (VIMC), two instances for edgetrack's tests");
+MODULE_LICENSE("GPL");
+EOF_VIMC
 printf 'vimc-y := vimc-core.o vimc-common.o vimc-streamer.o vimc-capture.o vimc-debayer.o \\\n  vimc-scaler.o vimc-sensor.o vimc-lens.o\nobj-m := vimc.o\n' > "$work/vimc/Kbuild"
 
 # gpio-sim links against irq_sim's exports: build irq_sim first and hand over its symbols.
