@@ -535,13 +535,14 @@ void Firmware::drainCanErrors() {
 // Degraded state and the status LED
 
 void Firmware::enterDegraded(const char* why) {
-    board_.cameras.stop();
-    cameraStarted_ = false;
+    // Frames go back before the stream stops: a backend frees its buffers when it stops.
     while (queueSize_ > 0) {
         board_.cameras.release(queue_[queueHead_].frame);
         queueHead_ = (queueHead_ + 1) % queue_.size();
         --queueSize_;
     }
+    board_.cameras.stop();
+    cameraStarted_ = false;
     if (state_ == FirmwareState::Calibrating)
         ++counters_.calibrationsAbandoned;
     state_ = FirmwareState::Degraded;

@@ -3,8 +3,10 @@
 
 #include <atomic>
 #include <csignal>
+#include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <poll.h>
 #include <string_view>
 #include <systemd/sd-daemon.h>
@@ -12,6 +14,8 @@
 
 #include "firmware_app/firmware.hpp"
 #include "firmware_app/model_file.hpp"
+#include "firmware_app/recording/recording.hpp"
+#include "hal/linux/linux_board.hpp"
 #include "hal/linux/posix_udp_sender.hpp"
 #include "hal/sim/scene.hpp"
 #include "hal/sim/sim_board.hpp"
@@ -62,6 +66,52 @@ private:
     bool enabled_;
 };
 
+/// Exit code asking systemd (Restart=on-failure) for a new process: EX_TEMPFAIL.
+constexpr int kExitRestart = 75;
+
+/// The stereo calibration of the real cameras, which must be for the configured image size.
+Result<StereoRig> loadBoardRig(const FirmwareConfig& config) {
+    if (config.cameras.rigFile.empty())
+        return Error{"--board linux needs the stereo calibration: set [cameras] rig (INTERFACES "
+                     "§2)"};
+    Result<StereoRig> rig = recording::readRig(config.cameras.rigFile);
+    if (!rig)
+        return rig;
+    for (int c = 0; c < 2; ++c) {
+        const CameraIntrinsics& intrinsics = rig->camera(c).intrinsics();
+        if (intrinsics.width_px != config.cameras.width_px ||
+            intrinsics.height_px != config.cameras.height_px)
+            return Error{config.cameras.rigFile.string() + ": camera " + std::to_string(c) +
+                         " is calibrated at " + std::to_string(intrinsics.width_px) + "x" +
+                         std::to_string(intrinsics.height_px) + ", [cameras] asks for " +
+                         std::to_string(config.cameras.width_px) + "x" +
+                         std::to_string(config.cameras.height_px)};
+    }
+    return rig;
+}
+
+linux_hal::LinuxBoardConfig linuxBoardConfig(const FirmwareConfig& config) {
+    linux_hal::LinuxBoardConfig board;
+    board.cameras.ids = {config.cameras.ids[0], config.cameras.ids[1]};
+    board.cameras.width_px = config.cameras.width_px;
+    board.cameras.height_px = config.cameras.height_px;
+    board.cameras.frameRate_hz = config.cameras.frameRate_hz;
+    board.cameras.exposure_us = config.cameras.exposure_us;
+    board.cameras.pairTolerance_us = config.cameras.pairTolerance_us;
+    board.cameras.buffers = config.cameras.buffers;
+    board.gpioChip = config.gpio.chip;
+    board.ledLine = config.gpio.ledLine;
+    board.buttonLine = config.gpio.buttonLine;
+    board.statusLine = config.gpio.statusLine;
+    board.flashDevice = config.flash.device;
+    board.flashSize = config.flash.size_bytes;
+    board.flashEraseBlock = config.flash.eraseBlock_bytes;
+    board.canEnabled = config.can.enabled;
+    board.can.interface = config.can.interface;
+    board.can.fd = config.can.fd;
+    return board;
+}
+
 } // namespace
 
 int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std::ostream& err) {
@@ -87,43 +137,62 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         config.can.enabled = true;
         config.can.interface = options.can;
     }
-    if (options.board != "sim") {
-        err << "edgetrack run: --board " << options.board
-            << ": the Linux backends (libcamera, libgpiod, SocketCAN) are not built yet (issue 8)"
-            << "\n";
-        return 2;
+    // The only place that picks a backend.
+    std::unique_ptr<sim::SimBoard> sim;
+    std::unique_ptr<linux_hal::PosixUdpSender> simUdp;
+    std::unique_ptr<linux_hal::LinuxBoard> linuxBoard;
+    std::optional<hal::Board> simBoardView;
+    StereoRig rig;
+    std::string boardName;
+    if (options.board == "linux") {
+        Result<StereoRig> loaded = loadBoardRig(config);
+        if (!loaded) {
+            err << "edgetrack run: " << loaded.error().message << "\n";
+            return 1;
+        }
+        rig = *loaded;
+        linuxBoard = std::make_unique<linux_hal::LinuxBoard>(linuxBoardConfig(config));
+        if (!linuxBoard->isValid()) {
+            err << "edgetrack run: " << linuxBoard->errorText() << "\n";
+            return 1;
+        }
+        boardName = "Linux board";
+    } else {
+        const std::string sceneName = options.scene.empty() ? "two_cubes" : options.scene;
+        std::optional<sim::Scene> scene = sim::makeScene(sceneName, options.seed);
+        if (!scene) {
+            err << "edgetrack run: unknown scene '" << sceneName << "' (edgetrack sim --list)\n";
+            return 2;
+        }
+        sim::SimBoardOptions boardOptions;
+        boardOptions.realTime = true;
+        boardOptions.cameraBufferPairs = config.cameras.buffers;
+        boardOptions.flashSize = config.flash.size_bytes;
+        boardOptions.flashEraseBlock = config.flash.eraseBlock_bytes;
+        sim = std::make_unique<sim::SimBoard>(std::move(*scene), options.seed, boardOptions);
+        // The simulated board's UDP is the host's: a DTrack client on this machine sees the poses.
+        simUdp = std::make_unique<linux_hal::PosixUdpSender>();
+        if (!simUdp->isValid()) {
+            err << "edgetrack run: cannot open a UDP socket: "
+                << std::strerror(simUdp->errnoAtOpen()) << "\n";
+            return 1;
+        }
+        simBoardView.emplace(hal::Board{sim->clock, sim->cameras, sim->ledRing, sim->button,
+                                        sim->statusLed, sim->flash, sim->can, *simUdp});
+        rig = sim->world.rig();
+        boardName = "simulated board, scene '" + sceneName + "'";
     }
-    const std::string sceneName = options.scene.empty() ? "two_cubes" : options.scene;
-    std::optional<sim::Scene> scene = sim::makeScene(sceneName, options.seed);
-    if (!scene) {
-        err << "edgetrack run: unknown scene '" << sceneName << "' (edgetrack sim --list)\n";
-        return 2;
-    }
+    hal::Board& board = linuxBoard ? linuxBoard->board() : *simBoardView;
 
-    sim::SimBoardOptions boardOptions;
-    boardOptions.realTime = true;
-    boardOptions.cameraBufferPairs = config.cameras.buffers;
-    boardOptions.flashSize = config.flash.size_bytes;
-    boardOptions.flashEraseBlock = config.flash.eraseBlock_bytes;
-    auto sim = std::make_unique<sim::SimBoard>(std::move(*scene), options.seed, boardOptions);
-    // The simulated board's UDP is the host's: a DTrack client on this machine sees the poses.
-    linux_hal::PosixUdpSender udp;
-    if (!udp.isValid()) {
-        err << "edgetrack run: cannot open a UDP socket: " << std::strerror(udp.errnoAtOpen())
-            << "\n";
-        return 1;
-    }
-    hal::Board board{sim->clock,     sim->cameras, sim->ledRing, sim->button,
-                     sim->statusLed, sim->flash,   sim->can,     udp};
-
-    Firmware firmware(config, board, sim->world.rig());
+    Firmware firmware(config, board, rig);
     if (!firmware.isValid()) {
         err << "edgetrack run: " << firmware.error() << "\n";
         return 1;
     }
     firmware.start();
-    out << "edgetrack run: simulated board, scene '" << sceneName << "'; " << firmware.flashReport()
-        << "\n";
+    out << "edgetrack run: " << boardName << "; " << firmware.flashReport() << "\n";
+    if (linuxBoard)
+        out << "edgetrack run: " << linuxBoard->cameras().describe() << "\n";
     if (!options.models.empty()) {
         Result<std::vector<NamedModel>> models =
             readModelDirectory(options.models, MarkerSet::kCapacity);
@@ -143,7 +212,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
             out << "edgetrack run: DTrack UDP to " << int{to.address[0]} << "."
                 << int{to.address[1]} << "." << int{to.address[2]} << "." << int{to.address[3]}
                 << ":" << to.port << "\n";
-    const bool interactive = options.buttonFromStdin && ::isatty(STDIN_FILENO) != 0;
+    const bool interactive = sim && options.buttonFromStdin && ::isatty(STDIN_FILENO) != 0;
     if (interactive)
         out << "edgetrack run: press Enter to start or end a calibration (the button), type "
                "'long' to delete all models, 's' for the status view, Ctrl-C to stop\n";
@@ -154,7 +223,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     std::signal(SIGTERM, onStopSignal);
     std::signal(SIGUSR1, onReportSignal);
 
-    StdinButton stdinButton(options.buttonFromStdin);
+    StdinButton stdinButton(sim != nullptr && options.buttonFromStdin);
     std::uint64_t watchdogInterval_us = 0;
     const bool watchdog = sd_watchdog_enabled(0, &watchdogInterval_us) > 0;
     const hal::Nanoseconds statusPeriod =
@@ -162,6 +231,8 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     hal::Nanoseconds nextStatus = board.clock.now() + statusPeriod;
     hal::Nanoseconds nextWatchdog = board.clock.now();
     bool notifiedReady = false;
+    std::string waitingFor;
+    hal::Nanoseconds nextDeviceCheck = board.clock.now();
     const bool terminal = ::isatty(STDERR_FILENO) != 0;
     while (!stopRequested) {
         switch (stdinButton.poll()) {
@@ -180,9 +251,32 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         }
         firmware.step();
         const hal::Nanoseconds now = board.clock.now();
+        if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+            err << "\nedgetrack run: a camera's device was removed while streaming; libcamera "
+                   "cannot take it back "
+                   "in this process: exiting so that systemd starts edgetrack again\n";
+            break;
+        }
         if (!notifiedReady && firmware.ready()) {
-            sd_notify(0, "READY=1");
-            notifiedReady = true;
+            // Cameras, flash and outputs up; on the real board the GPIO lines and CAN too.
+            bool devicesUp = true;
+            if (linuxBoard && now >= nextDeviceCheck) {
+                std::string why;
+                devicesUp = linuxBoard->devicesUp(why);
+                if (!devicesUp && why != waitingFor)
+                    err << "\nedgetrack run: waiting for " << why << "\n" << std::flush;
+                waitingFor = why;
+                nextDeviceCheck = now + 200 * hal::kNanosecondsPerMillisecond;
+            } else if (linuxBoard) {
+                devicesUp = false;
+            }
+            if (devicesUp) {
+                sd_notify(0, "READY=1");
+                notifiedReady = true;
+                out << "edgetrack run: ready (cameras" << (linuxBoard ? ", GPIO" : "")
+                    << (config.can.enabled ? ", CAN" : "") << " up)\n"
+                    << std::flush;
+            }
         }
         if (watchdog && now >= nextWatchdog) {
             sd_notify(0, "WATCHDOG=1");
@@ -208,6 +302,14 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     if (terminal && statusPeriod > 0)
         err << "\n";
     out << firmware.statusReport();
+    if (linuxBoard)
+        out << linuxBoard->report();
+    if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+        out << std::flush;
+        err << std::flush;
+        // libcamera still holds the removed camera: leave without running its destructors.
+        std::_Exit(kExitRestart);
+    }
     return 0;
 }
 

@@ -1,4 +1,4 @@
-// `edgetrack run`: the firmware on a board (the simulated one, or the real one with issue 8).
+// `edgetrack run`: the firmware on a board, the simulated one or the real one (libcamera, libgpiod, SocketCAN).
 #pragma once
 
 #include <cstdint>

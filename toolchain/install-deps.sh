@@ -4,7 +4,8 @@
 #   toolchain/install-deps.sh               host build, tests and benchmarks
 #   toolchain/install-deps.sh aarch64       also the cross compiler, qemu-user and arm64 libraries
 #   toolchain/install-deps.sh aarch64 hil   also the hardware-test VM (tests/hil): qemu-system,
-#                                           Debian's kernel, its headers and sources, can-utils
+#                                           Debian's kernel, its headers and sources, can-utils,
+#                                           gpiod and libcamera's tools (cam) and IPA modules
 set -euo pipefail
 
 if [ "$(id -u)" -ne 0 ]; then
@@ -17,7 +18,7 @@ apt_install() { apt-get install -y -q --no-install-recommends "$@"; }
 host_packages=(
     build-essential cmake ninja-build pkg-config git clang-format
     libeigen3-dev libtomlplusplus-dev libcli11-dev libsimde-dev nlohmann-json3-dev
-    zlib1g-dev libsystemd-dev libgpiod-dev
+    zlib1g-dev libsystemd-dev libgpiod-dev libcamera-dev
     libopencv-imgproc-dev
     libgtest-dev libgmock-dev libbenchmark-dev
 )
@@ -47,7 +48,7 @@ if want hil; then
     # The VM boots Debian's own kernel; gpio-sim and vimc are built from its sources against its
     # headers (tests/hil/build-modules.sh), so image, headers and sources must be one version.
     apt_install qemu-system-x86 linux-image-amd64 linux-headers-amd64 linux-source-6.1 \
-        busybox-static cpio kmod udev iproute2 can-utils xz-utils
+        busybox-static cpio kmod udev iproute2 can-utils xz-utils gpiod libcamera-ipa libcamera-tools
 fi
 
 if want aarch64; then
@@ -59,5 +60,5 @@ if want aarch64; then
     apt_install g++-aarch64-linux-gnu qemu-user \
         libc6:arm64 libstdc++6:arm64 \
         libgtest-dev:arm64 libgmock-dev:arm64 libbenchmark-dev:arm64 \
-        zlib1g-dev:arm64 libsystemd-dev:arm64 libgpiod-dev:arm64
+        zlib1g-dev:arm64 libsystemd-dev:arm64 libgpiod-dev:arm64 libcamera-dev:arm64
 fi

@@ -137,6 +137,25 @@ void SocketCanBus::flushQueue() {
     }
 }
 
+bool SocketCanBus::probe() {
+    if (fd_ < 0 && !open())
+        return false;
+    ifreq request{};
+    std::strncpy(request.ifr_name, config_.interface.c_str(), IFNAMSIZ - 1);
+    if (::ioctl(fd_, SIOCGIFFLAGS, &request) < 0) {
+        goDown(errno == ENODEV);
+        return false;
+    }
+    if ((request.ifr_flags & IFF_UP) == 0) {
+        if (state_ != hal::CanState::Down)
+            goDown(false);
+        return false;
+    }
+    if (state_ == hal::CanState::Down)
+        setState(hal::CanState::ErrorActive, 0);
+    return true;
+}
+
 hal::CanSendResult SocketCanBus::send(const hal::CanFrame& frame) {
     if (!hal::isValidCanFrame(frame) || (frame.fd && !config_.fd)) {
         ++counters_.refused;

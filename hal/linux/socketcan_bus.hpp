@@ -53,6 +53,12 @@ public:
     hal::CanState state() const override { return state_; }
     hal::CanCounters counters() const override { return counters_; }
 
+    /**
+     * \brief Whether the interface is up now, without sending: re-opens a removed interface and
+     * reads its IFF_UP flag, leaving Down when it is up again (for start-up readiness).
+     */
+    bool probe();
+
     /// \return frames waiting in this backend's transmit queue.
     std::size_t queued() const { return transmitQueue_.size(); }
 

@@ -3,7 +3,8 @@
 #
 #   guest-can.sh HIL_CAN_BINARY
 set -u
-ip link add dev vcan0 type vcan && ip link set vcan0 mtu 72 && ip link set vcan0 up || exit 1
+source "$(dirname "$0")/guest-devices.sh"
+make_vcan || exit 1
 
 candump -L vcan0 > /tmp/candump.log 2>&1 &
 candump_pid=$!

@@ -27,6 +27,8 @@ hostname edgetrack-hil
 setup() {
     local modules_dir
     modules_dir=$(cat "$results/modules_dir")
+    # UDP: the loopback interface (no other network: -nic none).
+    ip link set lo up || return 1
     # CAN: the virtual bus and raw sockets.
     modprobe -a can can-raw vcan || return 1
     # GPIO: the simulator and its interrupt helper (out of tree, see build-modules.sh).
