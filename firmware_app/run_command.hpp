@@ -1,4 +1,4 @@
-// `edgetrack run`: the firmware on a board, the simulated one or the real one (libcamera, libgpiod, SocketCAN).
+// `edgetrack run`: the firmware on the simulated board or the real one (libcamera, gpiod, CAN).
 #pragma once
 
 #include <cstdint>
