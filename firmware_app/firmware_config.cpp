@@ -192,6 +192,7 @@ void readGpio(Section& s, GpioSettings& g) {
     s.text("led_line", g.ledLine);
     s.text("button_line", g.buttonLine);
     s.text("status_line", g.statusLine);
+    s.flag("button_active_low", g.buttonActiveLow);
     s.real("strobe_lead_us", g.strobeLead_us, 0.0, 10000.0);
     s.real("strobe_tail_us", g.strobeTail_us, 0.0, 10000.0);
     s.real("debounce_ms", g.debounce_ms, 0.0, 500.0);

@@ -50,6 +50,9 @@ struct GpioSettings {
     std::string ledLine = "IR_LED";
     std::string buttonLine = "BUTTON";
     std::string statusLine = "STATUS_LED";
+    /// The button pulls its line low when pressed (with the line's pull-up); false: it drives
+    /// the line high (with a pull-down).
+    bool buttonActiveLow = true;
     /// The ring lights this long before the first sensor starts integrating...
     double strobeLead_us = 100.0;
     /// ...and stays lit this long after the last one stops.

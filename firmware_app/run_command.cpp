@@ -103,6 +103,7 @@ linux_hal::LinuxBoardConfig linuxBoardConfig(const FirmwareConfig& config) {
     board.ledLine = config.gpio.ledLine;
     board.buttonLine = config.gpio.buttonLine;
     board.statusLine = config.gpio.statusLine;
+    board.buttonActiveLow = config.gpio.buttonActiveLow;
     board.flashDevice = config.flash.device;
     board.flashSize = config.flash.size_bytes;
     board.flashEraseBlock = config.flash.eraseBlock_bytes;

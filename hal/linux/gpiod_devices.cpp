@@ -61,8 +61,9 @@ bool GpiodLine::request() {
     if (direction_ == Direction::Output) {
         status = gpiod_line_request_output_flags(line, kConsumer, flags, 0);
     } else {
-        if (activeLow_)
-            flags |= GPIOD_LINE_REQUEST_FLAG_BIAS_PULL_UP;
+        // A released button leaves the line to the bias: up when it pulls low, down otherwise.
+        flags |= activeLow_ ? GPIOD_LINE_REQUEST_FLAG_BIAS_PULL_UP
+                            : GPIOD_LINE_REQUEST_FLAG_BIAS_PULL_DOWN;
         status = gpiod_line_request_both_edges_events_flags(line, kConsumer, flags);
     }
     if (status != 0) {

@@ -135,7 +135,8 @@ private:
  *
  * Raw edges with the kernel's timestamps (CLOCK_MONOTONIC); debouncing and press lengths are the
  * firmware's (button_input.hpp). \a activeLow: the button pulls the line low when pressed (the
- * usual wiring, with the line's pull-up bias requested).
+ * usual wiring, with the line's pull-up bias requested); otherwise it drives the line high (with
+ * a pull-down requested). `[gpio] button_active_low` chooses.
  */
 class GpiodButton : public hal::Button {
 public:

@@ -175,6 +175,31 @@ TEST_F(GpioSim, ButtonPressesShortAndLongThroughTheDebouncer) {
     EXPECT_EQ(edges.size(), 4u);
 }
 
+TEST_F(GpioSim, AnActiveHighButtonIsPressedWhenItDrivesTheLineHigh) {
+    GpiodButton button(line("BUTTON"), clock_, /*activeLow=*/false);
+    ASSERT_TRUE(button.available()) << button.errorText();
+    const auto edgesWithin = [&](int milliseconds) {
+        std::vector<hal::ButtonEdge> edges;
+        const hal::Nanoseconds until = clock_.now() + milliseconds * kMs;
+        while (clock_.now() < until) {
+            hal::ButtonEdge edge;
+            while (button.nextEdge(edge))
+                edges.push_back(edge);
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        return edges;
+    };
+    EXPECT_TRUE(edgesWithin(100).empty()) << "the requested pull-down holds it released";
+    pull(1, "pull-up");
+    std::vector<hal::ButtonEdge> edges = edgesWithin(200);
+    ASSERT_EQ(edges.size(), 1u);
+    EXPECT_TRUE(edges[0].pressed);
+    pull(1, "pull-down");
+    edges = edgesWithin(200);
+    ASSERT_EQ(edges.size(), 1u);
+    EXPECT_FALSE(edges[0].pressed);
+}
+
 TEST_F(GpioSim, BusyLineIsReportedAndTakenOverWhenItsHolderLetsGo) {
     // Another program holds the LED line (gpioset keeps it until it is signalled).
     ASSERT_EQ(std::system(

@@ -66,6 +66,8 @@ TEST(FirmwareConfig, EmptyMeansDefaults) {
 
 TEST(FirmwareConfig, ValuesReachTheStages) {
     const Result<FirmwareConfig> c = parseFirmwareConfig(R"(
+[gpio]
+button_active_low = false
 [blobs]
 threshold = 90
 [tracking]
@@ -80,6 +82,7 @@ fd = true
                                                          "c.toml");
     ASSERT_TRUE(c) << c.error().message;
     EXPECT_EQ(c->blobs.threshold, 90);
+    EXPECT_FALSE(c->gpio.buttonActiveLow);
     EXPECT_DOUBLE_EQ(c->tracking.distanceTolerance_mm, 0.5);
     EXPECT_EQ(c->maxModels, 4u);
     ASSERT_EQ(c->udp.destinations.size(), 2u);
