@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
 #include <cstring>
 #include <dirent.h>
 #include <libcamera/camera.h>
@@ -18,7 +17,6 @@
 #include <sstream>
 #include <string_view>
 #include <sys/mman.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "core/simd/neon.hpp"
@@ -80,12 +78,6 @@ void rgbToGrey(const std::uint8_t* in, int bytesPerPixel, int width, std::uint8_
         const unsigned outer = (unsigned{p[0]} + p[2]) >> 1;
         out[x] = static_cast<std::uint8_t>((outer + p[1]) >> 1);
     }
-}
-
-hal::Nanoseconds monotonicNow() {
-    timespec ts{};
-    ::clock_gettime(CLOCK_MONOTONIC, &ts);
-    return hal::Nanoseconds{ts.tv_sec} * hal::kNanosecondsPerSecond + ts.tv_nsec;
 }
 
 /// \return true when this process holds a V4L2 or media device node that has been deleted.
@@ -173,7 +165,7 @@ Status LibcameraCameraPair::start() {
         failed_ = false;
         pairNumber_ = 0;
         for (Side& side : sides_)
-            side.lastCompletion = monotonicNow();
+            side.lastCompletion = clock_.now();
     }
     for (int index = 0; index < 2; ++index) {
         Side& side = sides_[static_cast<std::size_t>(index)];
@@ -252,7 +244,6 @@ Status LibcameraCameraPair::startSide(int index) {
     side.path = choice->path;
     side.bytesPerPixel = choice->bytesPerPixel;
     side.stride_bytes = static_cast<int>(stream.stride);
-    side.fourcc = stream.pixelFormat.fourcc();
 
     side.allocator = std::make_unique<libcamera::FrameBufferAllocator>(side.camera);
     if (const int ret = side.allocator->allocate(side.stream); ret <= 0)
@@ -308,47 +299,30 @@ void LibcameraCameraPair::stop() {
     stopSides();
 }
 
-void LibcameraCameraPair::abandon(Side& side) {
-    side.camera->requestCompleted.disconnect(this);
-    side.camera->disconnected.disconnect(this);
-    abandoned_.push_back(std::move(side));
-    side = Side{};
-    side.completed.resize(slots_.size());
-}
-
 void LibcameraCameraPair::stopSides() {
     for (Side& side : sides_) {
-        if (side.removed) {
-            abandon(side);
-            continue;
-        }
-        if (side.started)
-            side.camera->stop(); // cancels the queued requests; the handler ignores them now
         if (side.camera) {
             side.camera->requestCompleted.disconnect(this);
             side.camera->disconnected.disconnect(this);
         }
-        side.requests.clear();
-        for (const MappedBuffer& m : side.mapped)
-            ::munmap(m.base, m.length);
-        side.mapped.clear();
-        side.grey.clear();
-        side.allocator.reset();
-        if (side.acquired)
-            side.camera->release();
-        side.configuration.reset();
-        side.startControls.reset();
-        side.camera.reset();
-        side.stream = nullptr;
-        side.acquired = false;
-        side.started = false;
+        if (side.removed) {
+            // libcamera 0.0.3 aborts when a camera whose device is gone is stopped: keep all of
+            // it alive, unstopped, until the process ends (see needsProcessRestart()).
+            abandoned_.push_back(std::move(side));
+        } else {
+            if (side.started)
+                side.camera->stop(); // cancels the queued requests
+            side.requests.clear();   // before the allocator frees their buffers
+            for (const MappedBuffer& m : side.mapped)
+                ::munmap(m.base, m.length);
+            side.allocator.reset();
+            if (side.acquired)
+                side.camera->release();
+        }
+        side = Side{};
+        side.completed.resize(slots_.size());
     }
     std::lock_guard lock(mutex_);
-    for (Side& side : sides_) {
-        side.completedHead = 0;
-        side.completedCount = 0;
-        side.sequenceKnown = false;
-    }
     for (PairSlot& slot : slots_)
         slot = PairSlot{};
     failed_ = false;
@@ -367,7 +341,7 @@ void LibcameraCameraPair::onRequestCompleted(int index, libcamera::Request* requ
     if (!streaming_)
         return; // cancelled by stop()
     Side& side = sides_[static_cast<std::size_t>(index)];
-    side.lastCompletion = monotonicNow();
+    side.lastCompletion = clock_.now();
     const int buffer = static_cast<int>(request->cookie() % kCookieStride);
     const libcamera::FrameBuffer* frameBuffer = request->findBuffer(side.stream);
     if (request->status() == libcamera::Request::RequestCancelled) {
@@ -391,16 +365,19 @@ void LibcameraCameraPair::onRequestCompleted(int index, libcamera::Request* requ
         request->metadata().get(libcamera::controls::ExposureTime);
     Completed completed;
     completed.buffer = buffer;
-    completed.exposureStart =
+    hal::CameraFrame& timing = completed.frame;
+    timing.width_px = config_.width_px;
+    timing.height_px = config_.height_px;
+    timing.exposureStart =
         sensorTime ? *sensorTime : static_cast<hal::Nanoseconds>(metadata.timestamp);
-    completed.exposureEnd =
-        completed.exposureStart + (exposure_us ? hal::Nanoseconds{*exposure_us} * 1000
-                                               : fromMicroseconds(config_.exposure_us));
-    completed.sequence = metadata.sequence;
-    if (side.sequenceKnown && completed.sequence > side.lastSequence + 1)
-        counters_.droppedNoBuffer += completed.sequence - side.lastSequence - 1;
+    timing.exposureEnd =
+        timing.exposureStart + (exposure_us ? hal::Nanoseconds{*exposure_us} * 1000
+                                            : fromMicroseconds(config_.exposure_us));
+    timing.sequence = metadata.sequence;
+    if (side.sequenceKnown && timing.sequence > side.lastSequence + 1)
+        counters_.droppedNoBuffer += timing.sequence - side.lastSequence - 1;
     side.sequenceKnown = true;
-    side.lastSequence = completed.sequence;
+    side.lastSequence = timing.sequence;
     // At most one entry per buffer, so the ring (one slot per buffer) cannot overflow.
     side.completed[(side.completedHead + side.completedCount) % side.completed.size()] = completed;
     ++side.completedCount;
@@ -414,7 +391,8 @@ void LibcameraCameraPair::onDisconnected(int index) {
     frameArrived_.notify_all();
 }
 
-void LibcameraCameraPair::checkForRemovedCamera(hal::Nanoseconds now) {
+void LibcameraCameraPair::checkForRemovedCamera() {
+    const hal::Nanoseconds now = clock_.now();
     const hal::Nanoseconds silence =
         std::max(10 * framePeriod_, 250 * hal::kNanosecondsPerMillisecond);
     const auto suspect = [&](const Side& side) {
@@ -429,6 +407,12 @@ void LibcameraCameraPair::checkForRemovedCamera(hal::Nanoseconds now) {
             side.removed = true;
             failed_ = true;
         }
+}
+
+hal::AcquireStatus LibcameraCameraPair::fail() {
+    checkForRemovedCamera();
+    ++counters_.failures;
+    return hal::AcquireStatus::Failed;
 }
 
 LibcameraCameraPair::Completed LibcameraCameraPair::popCompleted(int index) {
@@ -448,16 +432,13 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
     for (;;) {
         if (!streaming_)
             return hal::AcquireStatus::Stopped;
-        if (failed_) {
-            checkForRemovedCamera(monotonicNow());
-            ++counters_.failures;
-            return hal::AcquireStatus::Failed;
-        }
+        if (failed_)
+            return fail();
         while (sides_[0].completedCount > 0 && sides_[1].completedCount > 0) {
-            const Completed& a = sides_[0].completed[sides_[0].completedHead];
-            const Completed& b = sides_[1].completed[sides_[1].completedHead];
-            const hal::Nanoseconds midA = a.exposureStart + (a.exposureEnd - a.exposureStart) / 2;
-            const hal::Nanoseconds midB = b.exposureStart + (b.exposureEnd - b.exposureStart) / 2;
+            const hal::Nanoseconds midA =
+                sides_[0].completed[sides_[0].completedHead].frame.midExposure();
+            const hal::Nanoseconds midB =
+                sides_[1].completed[sides_[1].completedHead].frame.midExposure();
             if (std::abs(midA - midB) <= pairTolerance_) {
                 pair = {popCompleted(0), popCompleted(1)};
                 break;
@@ -469,12 +450,8 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
         if (pair[0].buffer >= 0)
             break;
         if (timedOut || timeout <= 0) {
-            checkForRemovedCamera(monotonicNow());
-            if (failed_) {
-                ++counters_.failures;
-                return hal::AcquireStatus::Failed;
-            }
-            return hal::AcquireStatus::Timeout;
+            checkForRemovedCamera();
+            return failed_ ? fail() : hal::AcquireStatus::Timeout;
         }
         // One more look at the state and the queues after the wait, whatever ended it.
         timedOut = frameArrived_.wait_until(lock, deadline) == std::cv_status::timeout;
@@ -489,6 +466,8 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
     slot.inUse = true;
     slot.buffer = {pair[0].buffer, pair[1].buffer};
     ++counters_.delivered;
+    if (sides_[0].path == PixelPath::ConvertRgb || sides_[1].path == PixelPath::ConvertRgb)
+        ++libcameraCounters_.converted;
     frame.number = pairNumber_++;
     frame.slot = slotIndex;
     lock.unlock();
@@ -498,11 +477,7 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
         Side& side = sides_[c];
         const int buffer = pair[c].buffer;
         hal::CameraFrame& out = frame.camera[c];
-        out.width_px = config_.width_px;
-        out.height_px = config_.height_px;
-        out.exposureStart = pair[c].exposureStart;
-        out.exposureEnd = pair[c].exposureEnd;
-        out.sequence = pair[c].sequence;
+        out = pair[c].frame;
         if (side.path == PixelPath::Direct) {
             out.pixels = side.mapped[static_cast<std::size_t>(buffer)].pixels;
             out.stride_bytes = side.stride_bytes;
@@ -511,10 +486,6 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
             out.pixels = side.grey[static_cast<std::size_t>(buffer)].data();
             out.stride_bytes = config_.width_px;
         }
-    }
-    if (sides_[0].path == PixelPath::ConvertRgb || sides_[1].path == PixelPath::ConvertRgb) {
-        std::lock_guard relock(mutex_);
-        ++libcameraCounters_.converted;
     }
     return hal::AcquireStatus::Frame;
 }

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "hal/camera_pair.hpp"
+#include "hal/linux/posix_clock.hpp"
 
 namespace libcamera {
 class Camera;
@@ -120,11 +121,10 @@ private:
         /// Plane 0 (the image, or the luma plane) within the mapping.
         const std::uint8_t* pixels = nullptr;
     };
+    /// A completed request: its buffer and the frame's timing (pixels are set by acquire()).
     struct Completed {
         int buffer = -1;
-        hal::Nanoseconds exposureStart = 0;
-        hal::Nanoseconds exposureEnd = 0;
-        std::uint64_t sequence = 0;
+        hal::CameraFrame frame;
     };
     struct Side {
         std::shared_ptr<libcamera::Camera> camera;
@@ -140,7 +140,6 @@ private:
         PixelPath path = PixelPath::Direct;
         int bytesPerPixel = 1;
         int stride_bytes = 0;
-        std::uint32_t fourcc = 0;
         bool acquired = false;
         bool started = false;
         /// Completed requests not yet paired, oldest first (a ring of `buffers` entries).
@@ -153,7 +152,7 @@ private:
         hal::Nanoseconds lastCompletion = 0;
         /// A request was cancelled under it or libcamera reported it disconnected.
         bool faulted = false;
-        /// Its device went away while streaming: it cannot be stopped (see abandon()).
+        /// Its device went away while streaming: it cannot be stopped (see stopSides()).
         bool removed = false;
     };
     struct PairSlot {
@@ -169,12 +168,14 @@ private:
     void requeue(int index, int buffer);
     Completed popCompleted(int index);
     void convertToGrey(Side& side, int buffer);
-    /// \brief Mark a silent camera removed when a video or media node we hold has gone.
-    void checkForRemovedCamera(hal::Nanoseconds now);
-    /// \brief Keep a removed camera's objects alive, unstopped (libcamera 0.0.3 would abort).
-    void abandon(Side& side);
+    /// \brief Mark a silent or faulted camera removed when a video or media node we hold has
+    /// gone; called with mutex_ held.
+    void checkForRemovedCamera();
+    /// \brief AcquireStatus::Failed, counted, after looking for a removed camera; mutex_ held.
+    hal::AcquireStatus fail();
 
     LibcameraPairConfig config_;
+    PosixClock clock_;
     hal::Nanoseconds framePeriod_ = 0;
     hal::Nanoseconds pairTolerance_ = 0;
     std::unique_ptr<libcamera::CameraManager> manager_;
