@@ -233,7 +233,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     hal::Nanoseconds nextWatchdog = board.clock.now();
     bool notifiedReady = false;
     std::string waitingFor;
-    hal::Nanoseconds nextDeviceCheck = board.clock.now();
+    hal::Nanoseconds nextReadyCheck = board.clock.now();
     const bool terminal = ::isatty(STDERR_FILENO) != 0;
     while (!stopRequested) {
         switch (stdinButton.poll()) {
@@ -254,24 +254,19 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         const hal::Nanoseconds now = board.clock.now();
         if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
             err << "\nedgetrack run: a camera's device was removed while streaming; libcamera "
-                   "cannot take it back "
-                   "in this process: exiting so that systemd starts edgetrack again\n";
+                   "cannot take it back in this process: exiting so that systemd starts "
+                   "edgetrack again\n";
             break;
         }
-        if (!notifiedReady && firmware.ready()) {
+        if (!notifiedReady && firmware.ready() && now >= nextReadyCheck) {
             // Cameras, flash and outputs up; on the real board the GPIO lines and CAN too.
-            bool devicesUp = true;
-            if (linuxBoard && now >= nextDeviceCheck) {
-                std::string why;
-                devicesUp = linuxBoard->devicesUp(why);
-                if (!devicesUp && why != waitingFor)
+            nextReadyCheck = now + 200 * hal::kNanosecondsPerMillisecond;
+            std::string why;
+            if (linuxBoard && !linuxBoard->devicesUp(why)) {
+                if (why != waitingFor)
                     err << "\nedgetrack run: waiting for " << why << "\n" << std::flush;
                 waitingFor = why;
-                nextDeviceCheck = now + 200 * hal::kNanosecondsPerMillisecond;
-            } else if (linuxBoard) {
-                devicesUp = false;
-            }
-            if (devicesUp) {
+            } else {
                 sd_notify(0, "READY=1");
                 notifiedReady = true;
                 out << "edgetrack run: ready (cameras" << (linuxBoard ? ", GPIO" : "")

@@ -40,6 +40,23 @@ constexpr bool isValidCanFrame(const CanFrame& frame) {
 /// \brief Controller states of ISO 11898 error confinement, plus interface down.
 enum class CanState { ErrorActive, ErrorWarning, ErrorPassive, BusOff, Down };
 
+/// \return the state as SocketCAN's documentation names it, e.g. "error passive", "bus-off".
+constexpr const char* canStateName(CanState state) {
+    switch (state) {
+    case CanState::ErrorActive:
+        return "error active";
+    case CanState::ErrorWarning:
+        return "error warning";
+    case CanState::ErrorPassive:
+        return "error passive";
+    case CanState::BusOff:
+        return "bus-off";
+    case CanState::Down:
+        return "down";
+    }
+    return "?";
+}
+
 enum class CanSendResult {
     Queued,        ///< accepted for transmission
     DroppedOldest, ///< queue was full: the oldest queued frame was dropped to make room

@@ -6,26 +6,6 @@
 
 namespace edgetrack::linux_hal {
 
-namespace {
-
-const char* canStateName(hal::CanState state) {
-    switch (state) {
-    case hal::CanState::ErrorActive:
-        return "error active";
-    case hal::CanState::ErrorWarning:
-        return "error warning";
-    case hal::CanState::ErrorPassive:
-        return "error passive";
-    case hal::CanState::BusOff:
-        return "bus-off";
-    case hal::CanState::Down:
-        return "down";
-    }
-    return "?";
-}
-
-} // namespace
-
 LinuxBoard::LinuxBoard(const LinuxBoardConfig& config)
     : config_(config)
     , cameras_(config.cameras)
@@ -80,7 +60,8 @@ std::string LinuxBoard::report() const {
         << (statusLed_.available() ? "held" : statusLed_.errorText()) << "\n";
     if (socketCan_)
         out << "CAN " << config_.can.interface << (config_.can.fd ? " (FD)" : "") << ": "
-            << canStateName(socketCan_->state()) << ", " << socketCan_->queued() << " queued\n";
+            << hal::canStateName(socketCan_->state()) << ", " << socketCan_->queued()
+            << " queued\n";
     else
         out << "CAN: off\n";
     return out.str();

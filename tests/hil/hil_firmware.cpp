@@ -35,6 +35,11 @@ using std::chrono::seconds;
 
 const char* const kDir = "/tmp/edgetrack-hil";
 const char* const kNotifySocket = "/tmp/edgetrack-hil/notify.sock";
+const char* const kConfigFile = "/tmp/edgetrack-hil/edgetrack.toml";
+const char* const kRigFile = "/tmp/edgetrack-hil/rig.toml";
+const char* const kModelDir = "/tmp/edgetrack-hil/models";
+const char* const kOutLog = "/tmp/edgetrack-hil/out.log";
+const char* const kErrLog = "/tmp/edgetrack-hil/err.log";
 
 void shell(const std::string& command) {
     const int rc = std::system(command.c_str());
@@ -140,17 +145,14 @@ public:
         pid_ = ::fork();
         if (pid_ == 0) {
             ::setenv("NOTIFY_SOCKET", kNotifySocket, 1);
-            const int out =
-                ::open("/tmp/edgetrack-hil/out.log", O_WRONLY | O_CREAT | O_TRUNC, 0644);
-            const int err =
-                ::open("/tmp/edgetrack-hil/err.log", O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            const int out = ::open(kOutLog, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+            const int err = ::open(kErrLog, O_WRONLY | O_CREAT | O_TRUNC, 0644);
             ::dup2(out, STDOUT_FILENO);
             ::dup2(err, STDERR_FILENO);
             const int null = ::open("/dev/null", O_RDONLY);
             ::dup2(null, STDIN_FILENO);
             ::execl(binary.c_str(), binary.c_str(), "run", "--board", "linux", "--config",
-                    "/tmp/edgetrack-hil/edgetrack.toml", "--models", "/tmp/edgetrack-hil/models",
-                    static_cast<char*>(nullptr));
+                    kConfigFile, "--models", kModelDir, static_cast<char*>(nullptr));
             ::_exit(127);
         }
     }
@@ -178,8 +180,8 @@ public:
         ::kill(pid_, SIGTERM);
         return waitExit(timeout);
     }
-    static std::string out() { return readFile("/tmp/edgetrack-hil/out.log"); }
-    static std::string err() { return readFile("/tmp/edgetrack-hil/err.log"); }
+    static std::string out() { return readFile(kOutLog); }
+    static std::string err() { return readFile(kErrLog); }
 
 private:
     pid_t pid_ = -1;
@@ -198,19 +200,20 @@ protected:
         binary_ = binary;
         chip_ = chip;
         sysfs_ = std::getenv("EDGETRACK_GPIO_SYSFS");
-        shell(std::string("rm -rf ") + kDir + " && mkdir -p " + kDir + "/models");
-        std::ofstream config(std::string(kDir) + "/edgetrack.toml");
+        shell(std::string("rm -rf ") + kDir + " && mkdir -p " + kModelDir);
+        std::ofstream config(kConfigFile);
         // vimc's two instances run free (not triggered together) at 15-30 Hz under TCG.
         config << "[cameras]\ncamera0_id = \"" << camera0 << "\"\ncamera1_id = \"" << camera1
                << "\"\nwidth_px = 480\nheight_px = 360\nframe_rate_hz = 15.0\n"
                   "pair_tolerance_us = 100000.0\ntimeout_s = 3.0\nretry_s = 1.0\n"
-                  "rig = \"/tmp/edgetrack-hil/rig.toml\"\n"
+                  "rig = \""
+               << kRigFile << "\"\n"
                << "[gpio]\nchip = \"" << chip << "\"\ndebounce_ms = 30.0\n"
                << "[flash]\ndevice = \"/tmp/edgetrack-hil/models.flash\"\n"
                << "[output.udp]\ndestinations = [\"127.0.0.1:5000\"]\n"
                << "[output.can]\nenabled = true\ninterface = \"vcan0\"\n"
                << "[health]\nstatus_interval_s = 0.25\n";
-        std::ofstream rig(std::string(kDir) + "/rig.toml");
+        std::ofstream rig(kRigFile);
         for (int c = 0; c < 2; ++c)
             rig << "[[camera]]\nwidth = 480\nheight = 360\nfx = 500.0\nfy = 500.0\ncx = 240.0\n"
                    "cy = 180.0\ndistortion = [0.0, 0.0, 0.0, 0.0, 0.0]\n"
@@ -218,7 +221,7 @@ protected:
                 << (c == 0 ? "0.0" : "-100.0") << ", 0.0, 0.0]\n";
         // One body (id 1: CAN frames 0x303-0x305) that vimc's test pattern never shows: the
         // firmware sends its status frame, "not found", every frame while tracking.
-        std::ofstream model(std::string(kDir) + "/models/body_1.json");
+        std::ofstream model(std::string(kModelDir) + "/body_1.json");
         model << R"({ "id": 1, "name": "tetrahedron",
   "markers": [[0, 0, 0], [60, 0, 0], [0, 45, 0], [0, 0, 30]],
   "edges": [[0, 1, 60], [0, 2, 45], [0, 3, 30], [1, 2, 75], [1, 3, 67.082], [2, 3, 54.083]],
