@@ -2,6 +2,7 @@
 #include "core/blob_detector.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "core/simd/neon.hpp"
@@ -19,6 +20,19 @@ constexpr std::size_t idx(int i) {
 inline bool anyLaneSet(uint8x16_t v) {
     const uint64x2_t halves = vreinterpretq_u64_u8(v);
     return (vgetq_lane_u64(halves, 0) | vgetq_lane_u64(halves, 1)) != 0;
+}
+
+// The byte maximum of row[0, length), length a multiple of 64; four accumulators keep the loads
+// independent.
+inline uint8x16_t maximumOf(const std::uint8_t* row, int length) {
+    uint8x16_t m0 = vdupq_n_u8(0), m1 = m0, m2 = m0, m3 = m0;
+    for (int at = 0; at < length; at += 64) {
+        m0 = vmaxq_u8(m0, vld1q_u8(row + at));
+        m1 = vmaxq_u8(m1, vld1q_u8(row + at + 16));
+        m2 = vmaxq_u8(m2, vld1q_u8(row + at + 32));
+        m3 = vmaxq_u8(m3, vld1q_u8(row + at + 48));
+    }
+    return vmaxq_u8(vmaxq_u8(m0, m1), vmaxq_u8(m2, m3));
 }
 } // namespace
 
@@ -103,17 +117,19 @@ int BlobDetector::unite(int a, int b) {
 
 void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
     Moments m;
-    std::int64_t sumI = 0, sumIx = 0, sumX = 0, sumXX = 0;
+    std::int64_t sumI = 0, sumIx = 0;
     int peak = 0;
     for (int x = x0; x <= x1; ++x) {
         const int intensity = row[x];
         sumI += intensity;
         sumIx += static_cast<std::int64_t>(intensity) * x;
-        sumX += x;
-        sumXX += static_cast<std::int64_t>(x) * x;
         peak = std::max(peak, intensity);
     }
+    // Sums of x and x^2 over x0..x1 in closed form.
     const std::int64_t count = x1 - x0 + 1;
+    auto sumOfSquaresTo = [](std::int64_t n) { return n * (n + 1) * (2 * n + 1) / 6; };
+    const std::int64_t sumX = (static_cast<std::int64_t>(x0) + x1) * count / 2;
+    const std::int64_t sumXX = sumOfSquaresTo(x1) - sumOfSquaresTo(x0 - 1);
     m.count = count;
     m.sumI = sumI;
     m.sumIx = sumIx;
@@ -175,9 +191,7 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     auto anyBright = [&](uint8x16_t maximum) {
         return anyLaneSet(vqsubq_u8(maximum, belowThreshold));
     };
-    auto anyDark = [&](uint8x16_t minimum) {
-        return anyLaneSet(vcltq_u8(minimum, thresholdVector));
-    };
+    const int wholePieces = width_ & ~63;
     for (int y = 0; y < height_; ++y) {
         const std::uint8_t* row = pixels + static_cast<std::ptrdiff_t>(y) * stride_bytes;
         int runStart = -1;
@@ -191,46 +205,74 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
                 runStart = -1;
             }
         };
-        // Dark stretches (nearly all of an IR frame) are skipped 64 bytes at a time: one load per
-        // byte and one horizontal maximum per 64.
-        while (x + 64 <= width_) {
-            const uint8x16_t a = vld1q_u8(row + x);
-            const uint8x16_t b = vld1q_u8(row + x + 16);
-            const uint8x16_t c = vld1q_u8(row + x + 32);
-            const uint8x16_t d = vld1q_u8(row + x + 48);
-            const uint8x16_t maximum = vmaxq_u8(vmaxq_u8(a, b), vmaxq_u8(c, d));
-            if (!anyBright(maximum)) {
-                if (runStart >= 0) {
-                    closeRun(y, runStart, x - 1, row);
+        // A 16-byte piece with both bright and dark pixels: run edges from a 4-bits-per-pixel
+        // mask (the NEON stand-in for a movemask), so the loop steps per edge, not per pixel.
+        auto scanEdges = [&](int piece, uint8x16_t v) {
+            const std::uint64_t bright =
+                vget_lane_u64(vreinterpret_u64_u8(vshrn_n_u16(
+                                  vreinterpretq_u16_u8(vcgeq_u8(v, thresholdVector)), 4)),
+                              0);
+            int offset = 0;
+            while (offset < 16) {
+                const std::uint64_t wanted = runStart < 0 ? bright : ~bright;
+                const std::uint64_t rest = wanted >> (4 * offset);
+                if (rest == 0)
+                    return;
+                offset += std::countr_zero(rest) / 4;
+                if (runStart < 0) {
+                    runStart = piece + offset;
+                } else {
+                    closeRun(y, runStart, piece + offset - 1, row);
                     runStart = -1;
                 }
-                x += 64;
-                continue;
             }
-            const uint8x16_t minimum = vminq_u8(vminq_u8(a, b), vminq_u8(c, d));
-            if (!anyDark(minimum)) {
-                if (runStart < 0)
-                    runStart = x;
-                x += 64;
-                continue;
+        };
+        auto closeOpenRun = [&](int end) {
+            if (runStart >= 0) {
+                closeRun(y, runStart, end - 1, row);
+                runStart = -1;
             }
-            // Mixed: look closer, 16 bytes at a time; only mixed 16-byte pieces go pixel by pixel.
-            for (const int end = x + 64; x < end; x += 16) {
-                const uint8x16_t v = vld1q_u8(row + x);
-                if (!anyBright(v)) {
-                    if (runStart >= 0) {
-                        closeRun(y, runStart, x - 1, row);
-                        runStart = -1;
-                    }
-                } else if (!anyDark(v)) {
-                    if (runStart < 0)
-                        runStart = x;
-                } else {
-                    for (int i = x; i < x + 16; ++i)
-                        scalarPixel(i);
-                }
+        };
+        // One 64-byte piece: all dark, all bright, or a closer look 16 bytes at a time where only
+        // mixed 16-byte pieces go pixel by pixel.
+        auto scan64 = [&](int at) {
+            const uint8x16_t a = vld1q_u8(row + at);
+            const uint8x16_t b = vld1q_u8(row + at + 16);
+            const uint8x16_t c = vld1q_u8(row + at + 32);
+            const uint8x16_t d = vld1q_u8(row + at + 48);
+            if (!anyBright(vmaxq_u8(vmaxq_u8(a, b), vmaxq_u8(c, d)))) {
+                closeOpenRun(at);
+                return;
             }
+            scanEdges(at, a);
+            scanEdges(at + 16, b);
+            scanEdges(at + 32, c);
+            scanEdges(at + 48, d);
+        };
+        // Most rows of an IR frame are dark all along: one load per byte and a single test per
+        // row, as cheap as a plain read. A row with something bright is read again from L1: dark
+        // stretches skipped 256 bytes at a time, pieces with anything bright 64 bytes at a time.
+        if (!anyBright(maximumOf(row, wholePieces)))
+            x = wholePieces;
+        while (x + 256 <= width_) {
+            uint8x16_t m0 = vld1q_u8(row + x), m1 = vld1q_u8(row + x + 16);
+            uint8x16_t m2 = vld1q_u8(row + x + 32), m3 = vld1q_u8(row + x + 48);
+            for (int at = x + 64; at < x + 256; at += 64) {
+                m0 = vmaxq_u8(m0, vld1q_u8(row + at));
+                m1 = vmaxq_u8(m1, vld1q_u8(row + at + 16));
+                m2 = vmaxq_u8(m2, vld1q_u8(row + at + 32));
+                m3 = vmaxq_u8(m3, vld1q_u8(row + at + 48));
+            }
+            if (!anyBright(vmaxq_u8(vmaxq_u8(m0, m1), vmaxq_u8(m2, m3)))) {
+                closeOpenRun(x);
+            } else {
+                for (int at = x; at < x + 256; at += 64)
+                    scan64(at);
+            }
+            x += 256;
         }
+        for (; x + 64 <= width_; x += 64)
+            scan64(x);
         for (; x < width_; ++x)
             scalarPixel(x);
         if (runStart >= 0)

@@ -69,12 +69,7 @@ Vec2 CameraModel::pixelFromNormalized(const Vec2& normalized) const {
             intrinsics_.fy_px * normalized.y() + intrinsics_.cy_px};
 }
 
-std::optional<Vec2> CameraModel::undistortPixel(const Vec2& pixel) const {
-    const Vec2 target{(pixel.x() - intrinsics_.cx_px) / intrinsics_.fx_px,
-                      (pixel.y() - intrinsics_.cy_px) / intrinsics_.fy_px};
-    // Newton converges quadratically where OpenCV's fixed-point iteration stalls near the corners
-    // of strongly distorted lenses; the distorted point is the natural first guess.
-    Vec2 estimate = target;
+std::optional<Vec2> CameraModel::newtonUndistort(const Vec2& target, Vec2 estimate) const {
     constexpr int kMaxIterations = 30;
     constexpr double kTolerance = 1e-12;
     for (int i = 0; i < kMaxIterations; ++i) {
@@ -94,6 +89,19 @@ std::optional<Vec2> CameraModel::undistortPixel(const Vec2& pixel) const {
     if (residual.norm() < 1e-9)
         return estimate;
     return std::nullopt;
+}
+
+std::optional<Vec2> CameraModel::undistortPixel(const Vec2& pixel) const {
+    const Vec2 target{(pixel.x() - intrinsics_.cx_px) / intrinsics_.fx_px,
+                      (pixel.y() - intrinsics_.cy_px) / intrinsics_.fy_px};
+    // Newton converges quadratically where OpenCV's fixed-point iteration stalls near the corners
+    // of strongly distorted lenses. It starts one fixed-point step away from the distorted point,
+    // closer by about the distortion's square, which saves a Newton step or two per blob; where
+    // that start overshoots into a fold of a strong lens, it starts again from the distorted point.
+    if (const std::optional<Vec2> undistorted =
+            newtonUndistort(target, 2.0 * target - distortNormalized(target)))
+        return undistorted;
+    return newtonUndistort(target, target);
 }
 
 std::optional<Ray> CameraModel::ray(const Vec2& pixel) const {

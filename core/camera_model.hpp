@@ -78,6 +78,8 @@ public:
     std::optional<Ray> ray(const Vec2& pixel) const;
 
 private:
+    /// Newton's method for the undistorted point whose distortion is \a target, from \a estimate.
+    std::optional<Vec2> newtonUndistort(const Vec2& target, Vec2 estimate) const;
     CameraIntrinsics intrinsics_{};
     CameraExtrinsics extrinsics_{};
     Vec3 centre_rig_mm_ = Vec3::Zero();

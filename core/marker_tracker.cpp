@@ -19,6 +19,7 @@ MarkerTracker::MarkerTracker(const FrameToFrameConfig& config)
     , current_(config.maxMarkers)
     , predicted_(config.maxMarkers)
     , matchOf_(config.maxMarkers)
+    , predictedByX_(config.maxMarkers)
     , blocks_(config.maxMarkers, config.maxMarkers) {}
 
 void MarkerTracker::reset() {
@@ -50,11 +51,23 @@ std::span<const TrackedMarker> MarkerTracker::update(double time_s, std::span<co
 
     const double gate2 = config_.gate_mm * config_.gate_mm;
     const double twoSigma2 = 2.0 * config_.sigma_mm * config_.sigma_mm;
+    // Only predictions within the gate can link; in x they lie in a slab of twice its width.
+    predictedByX_.clear();
+    for (std::size_t j = 0; j < predicted_.size(); ++j)
+        predictedByX_.push_back(static_cast<int>(j));
+    std::sort(predictedByX_.begin(), predictedByX_.end(),
+              [this](int a, int b) { return predicted_[idx(a)].x() < predicted_[idx(b)].x(); });
     blocks_.reset(count, predicted_.size());
-    for (std::size_t i = 0; i < count; ++i)
-        for (std::size_t j = 0; j < predicted_.size(); ++j)
-            if ((points[i] - predicted_[j]).squaredNorm() <= gate2)
-                blocks_.link(i, j);
+    for (std::size_t i = 0; i < count; ++i) {
+        const double slabStart = points[i].x() - config_.gate_mm;
+        auto j = std::partition_point(predictedByX_.begin(), predictedByX_.end(),
+                                      [&](int k) { return predicted_[idx(k)].x() < slabStart; });
+        for (;
+             j != predictedByX_.end() && predicted_[idx(*j)].x() <= points[i].x() + config_.gate_mm;
+             ++j)
+            if ((points[i] - predicted_[idx(*j)]).squaredNorm() <= gate2)
+                blocks_.link(i, idx(*j));
+    }
     blocks_.build();
 
     auto proximity = [&](int i, int j) {

@@ -76,6 +76,8 @@ private:
     BoundedVector<TrackedMarker> current_;
     BoundedVector<Vec3> predicted_;
     BoundedVector<int> matchOf_;
+    /// Predicted markers in order of x, so that gating looks only at a slab of them.
+    BoundedVector<int> predictedByX_;
     BipartiteBlocks blocks_;
     BlockSolver solver_;
     double previousTime_s_ = 0.0;

@@ -22,8 +22,10 @@ constexpr std::size_t kMaxNeighbours = 32;
 struct Neighbourhood {
     static constexpr float kFar = 1e9f;
     std::size_t count = 0;
-    alignas(16) float x[kMaxNeighbours];
-    alignas(16) float y[kMaxNeighbours];
+    // One slot beyond the list: the collecting sweep writes every candidate there and only counts
+    // the ones inside the region, which keeps its unpredictable test off the branch predictor.
+    alignas(16) float x[kMaxNeighbours + 4];
+    alignas(16) float y[kMaxNeighbours + 4];
 
     void clear() { count = 0; }
     void add(const Vec2& offset) {
@@ -176,25 +178,23 @@ void StereoMatcher::collectNeighbours(int camera) {
         p.neighbours[camera][i].clear();
     const double* xs = p.sortedX[camera].get();
     const double* ys = p.sortedY[camera].get();
+    int first = 0;
     for (int s = 0; s < valid; ++s) {
         Neighbourhood& list = p.neighbours[camera][idx(p.byRow[camera][idx(s)])];
         const double x = xs[s], y = ys[s];
-        // The rows of region R form one stretch of the sorted order; take it in one sweep.
-        int first = s;
-        while (first > 0 && y - ys[first - 1] < half)
-            --first;
-        bool crowded = false;
-        for (int k = first; k < valid && ys[k] - y < half; ++k) {
+        // The rows of region R form one stretch of the sorted order, whose start only moves on
+        // as the blobs go down the image; take the stretch in one sweep.
+        while (y - ys[first] >= half)
+            ++first;
+        std::size_t count = 0;
+        for (int k = first; k < valid && ys[k] - y < half && count <= kMaxNeighbours; ++k) {
             const double dx = xs[k] - x;
-            if (k == s || std::abs(dx) >= half)
-                continue;
-            if (list.count == kMaxNeighbours) {
-                crowded = true;
-                break;
-            }
-            list.add({dx, ys[k] - y});
+            list.x[count] = static_cast<float>(dx);
+            list.y[count] = static_cast<float>(ys[k] - y);
+            count += static_cast<std::size_t>(k != s && std::abs(dx) < half);
         }
-        if (crowded) {
+        list.count = count;
+        if (count > kMaxNeighbours) {
             // More than the list holds: keep the nearest rows, scanning outward from the blob's.
             list.clear();
             int up = s - 1, down = s + 1;

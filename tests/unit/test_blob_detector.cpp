@@ -149,6 +149,12 @@ TEST(BlobDetector, AgreesWithFloodFillOnEveryLayout) {
         spots.push_back(disc(63.5, 10.0, 3.0));   // across the first 64-byte boundary
         spots.push_back(disc(w - 1.0, 5.0, 3.0)); // on the right edge
         drawSpots(image, spots);
+        // A patch of speckle: several runs start and end inside one 16-byte piece.
+        std::bernoulli_distribution speck(0.4);
+        for (int yy = h / 4; yy < std::min(h, h / 4 + 12); ++yy)
+            for (int xx = w / 3; xx < std::min(w, w / 3 + 90); ++xx)
+                if (speck(random))
+                    image.at(xx, yy) = 180;
         // Isolated specks and a full-width line too.
         image.at(0, h - 1) = 255;
         image.at(w - 1, h - 1) = 255;
