@@ -28,7 +28,13 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , stamp_(config.maxMarkers)
     , candidates_(config.maxMarkers)
     , memberPairs_(stride_ * stride_)
-    , seen_(stride_)
+    , searchPoints_(config.maxMarkers)
+    , piecePoints_(stride_)
+    , seenApart_(
+          std::make_unique<std::uint64_t[]>(config.maxObjects * ((config.maxObjects + 63) / 64)))
+    , seenApartWords_((config.maxObjects + 63) / 64)
+    , extentCentre_(config.maxObjects)
+    , extentRadius_(config.maxObjects)
     , edgeAlpha_(2.0 / (config.edgeWindow_frames + 1.0)) {
     objects_.resize(config.maxObjects);
     for (Object& o : objects_) {
@@ -38,6 +44,10 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     }
     markers_.resize(config.maxMarkers);
     stamp_.resize(config.maxMarkers);
+    for (std::size_t i = 0; i < config.maxObjects; ++i) {
+        extentCentre_.push_back(Vec3::Zero());
+        extentRadius_.push_back(-1.0);
+    }
 }
 
 void ObjectCalibrator::reset() {
@@ -49,6 +59,8 @@ void ObjectCalibrator::reset() {
     for (KnownMarker& m : markers_)
         m = KnownMarker{};
     byTrackerId_.clear();
+    std::fill_n(seenApart_.get(), objects_.size() * seenApartWords_, std::uint64_t{0});
+    nextShapeSearch_ = 0;
     counters_ = CalibrationCounters{};
     nextMarkerId_ = 1;
     nextObjectId_ = 0;
@@ -599,18 +611,21 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
     o->rigFromObject = RigidTransform::identity();
 }
 
-std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
-                                                           std::span<const std::size_t> seen) {
-    if (seen.size() < kRefindMinMarkers)
+std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
+                                                          std::span<const Vec3> points,
+                                                          Members which, std::size_t minPoints,
+                                                          double share) {
+    if (points.size() < minPoints)
         return std::nullopt;
+    auto searched = [this, which](const Member& m) { return selects(which, m); };
     // Member pairs sorted by distance, so a candidate pair's distance finds its model pairs fast.
     memberPairs_.clear();
     const std::size_t n = o.members.size();
     for (std::size_t i = 0; i < n; ++i) {
-        if (!o.members[i].verified || o.members[i].visible)
+        if (!searched(o.members[i]))
             continue;
         for (std::size_t j = 0; j < n; ++j)
-            if (j != i && o.members[j].verified && !o.members[j].visible)
+            if (j != i && searched(o.members[j]))
                 memberPairs_.push_back(
                     {(o.members[i].model_mm - o.members[j].model_mm).norm(), i, j});
     }
@@ -620,16 +635,13 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
         memberPairs_.begin(), memberPairs_.end(),
         [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
     const double tol = config_.smin.tolerance_mm;
-    const std::size_t c = seen.size();
-    auto position = [&](std::size_t candidate) -> const Vec3& {
-        return markers_[seen[candidate]].position_rig_mm;
-    };
+    const std::size_t c = points.size();
     std::size_t budget = kRefindBudget;
     std::optional<RigidTransform> best;
-    std::size_t bestCount = kRefindMinMarkers - 1;
+    std::size_t bestCount = minPoints - 1;
     for (std::size_t a = 0; a < c && budget > 0; ++a)
         for (std::size_t b = a + 1; b < c && budget > 0; ++b) {
-            const double dab = (position(a) - position(b)).norm();
+            const double dab = (points[a] - points[b]).norm();
             const auto* first =
                 std::lower_bound(memberPairs_.begin(), memberPairs_.end(), dab - tol,
                                  [](const MemberPair& p, double d) { return p.distance_mm < d; });
@@ -639,23 +651,23 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
                 const Vec3& mi = o.members[pair->i].model_mm;
                 const Vec3& mj = o.members[pair->j].model_mm;
                 for (std::size_t cc = b + 1; cc < c && budget > 0; ++cc) {
-                    const double dac = (position(a) - position(cc)).norm();
-                    const double dbc = (position(b) - position(cc)).norm();
+                    const double dac = (points[a] - points[cc]).norm();
+                    const double dbc = (points[b] - points[cc]).norm();
                     for (std::size_t l = 0; l < n && budget > 0; ++l) {
                         --budget;
                         const Member& ml = o.members[l];
-                        if (l == pair->i || l == pair->j || !ml.verified || ml.visible ||
+                        if (l == pair->i || l == pair->j || !searched(ml) ||
                             std::abs((mi - ml.model_mm).norm() - dac) > tol ||
                             std::abs((mj - ml.model_mm).norm() - dbc) > tol)
                             continue;
                         const Vec3 from[3] = {mi, mj, ml.model_mm};
-                        const Vec3 to[3] = {position(a), position(b), position(cc)};
+                        const Vec3 to[3] = {points[a], points[b], points[cc]};
                         const std::optional<RigidFit> fit = fitRigid(from, to);
                         if (!fit)
                             continue;
                         std::size_t count = 0;
                         for (std::size_t k = 0; k < c; ++k)
-                            if (occludedMemberNear(o, fit->transform, position(k)) != kNone)
+                            if (memberNear(o, fit->transform, points[k], which) != kNone)
                                 ++count;
                         if (count > bestCount) {
                             bestCount = count;
@@ -669,14 +681,14 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
         ++counters_.refindBudgetExhausted;
     // A few markers can fit a wrong place of a large model by chance; most of what is seen must
     // sit on the model, and all of it tightly once fitted together.
-    if (!best || static_cast<double>(bestCount) < kRefindShare * static_cast<double>(c))
+    if (!best || static_cast<double>(bestCount) < share * static_cast<double>(c))
         return std::nullopt;
     fitFrom_.clear();
     fitTo_.clear();
     for (std::size_t k = 0; k < c; ++k)
-        if (const std::size_t m = occludedMemberNear(o, *best, position(k)); m != kNone) {
+        if (const std::size_t m = memberNear(o, *best, points[k], which); m != kNone) {
             fitFrom_.push_back(o.members[m].model_mm);
-            fitTo_.push_back(position(k));
+            fitTo_.push_back(points[k]);
         }
     const std::optional<RigidFit> refit = fitRigid(fitFrom_.span(), fitTo_.span());
     if (!refit || refit->rms_mm > config_.poseInlier_mm)
@@ -684,27 +696,30 @@ std::optional<RigidTransform> ObjectCalibrator::searchLost(const Object& o,
     return refit->transform;
 }
 
-std::size_t ObjectCalibrator::occludedMemberNear(const Object& o,
-                                                 const RigidTransform& rigFromObject,
-                                                 const Vec3& p_rig_mm) const {
+std::size_t ObjectCalibrator::memberNear(const Object& o, const RigidTransform& toFromObject,
+                                         const Vec3& p_mm, Members which) const {
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     for (std::size_t i = 0; i < o.members.size(); ++i) {
         const Member& m = o.members[i];
-        if (m.verified && !m.visible &&
-            (rigFromObject.apply(m.model_mm) - p_rig_mm).squaredNorm() <= radius2)
+        if (selects(which, m) && (toFromObject.apply(m.model_mm) - p_mm).squaredNorm() <= radius2)
             return i;
     }
     return kNone;
 }
 
 void ObjectCalibrator::refind(Object& o) {
-    const std::optional<RigidTransform> best = searchLost(o, candidates_.span());
+    searchPoints_.clear();
+    for (const std::size_t k : candidates_)
+        searchPoints_.push_back(markers_[k].position_rig_mm);
+    const std::optional<RigidTransform> best =
+        fitLayout(o, searchPoints_.span(), Members::Occluded);
     if (!best)
         return;
     // The candidates near a member's place are that member, seen again.
     for (std::size_t k = candidates_.size(); k-- > 0;) {
         const std::size_t fresh = candidates_[k];
-        const std::size_t i = occludedMemberNear(o, *best, markers_[fresh].position_rig_mm);
+        const std::size_t i =
+            memberNear(o, *best, markers_[fresh].position_rig_mm, Members::Occluded);
         if (i == kNone)
             continue;
         KnownMarker& known = markers_[o.members[i].marker];
@@ -757,17 +772,17 @@ void ObjectCalibrator::collapseObjects() {
 void ObjectCalibrator::mergeDuplicates() {
     // A body can end up as two objects: it was lost and its markers came back as new ones, which
     // joined other objects and broke away from them as a fragment. A fragment is merged into the
-    // object it duplicates when its markers sit on that object's markers: in place, when both have
-    // a pose now; by its shape, when the other was lost before the fragment was born.
+    // object it duplicates when its markers sit on that object's markers in place (both posed),
+    // or, when the two were never seen apart, when its layout fits the other's.
+    recordObjectsSeenApart();
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     for (Object& fragment : objects_) {
         if (!fragment.active || !fragment.posed)
             continue;
-        seen_.clear();
+        std::size_t visibleVerified = 0;
         for (const Member& m : fragment.members)
-            if (m.visible && m.verified)
-                seen_.push_back(m.marker);
-        if (seen_.size() < kMergeInPlaceMin)
+            visibleVerified += m.visible && m.verified ? 1 : 0;
+        if (visibleVerified < kMergeInPlaceMin)
             continue;
         for (Object& body : objects_) {
             if (&body == &fragment || !body.active)
@@ -775,30 +790,17 @@ void ObjectCalibrator::mergeDuplicates() {
             const bool larger =
                 body.members.size() > fragment.members.size() ||
                 (body.members.size() == fragment.members.size() && body.id < fragment.id);
-            if (body.posed) {
-                if (!larger)
-                    continue; // the pair is looked at from the other side
-                // Only markers established in both count: a new marker joins every object for
-                // a while, so sitting on both proves nothing until it has stayed with both.
-                std::size_t onBody = 0;
-                for (const Member& a : fragment.members) {
-                    if (!a.visible || !a.verified || !established(a))
-                        continue;
-                    const Vec3& p = markers_[a.marker].position_rig_mm;
-                    for (const Member& m : body.members)
-                        if (m.verified && established(m) &&
-                            (body.rigFromObject.apply(m.model_mm) - p).squaredNorm() <= radius2) {
-                            ++onBody;
-                            break;
-                        }
-                }
-                if (onBody < kMergeInPlaceMin)
-                    continue;
-                merge(fragment, body, body.rigFromObject.inverse() * fragment.rigFromObject);
-            } else {
+            if (!body.posed) {
+                // A body lost before the fragment was born: the fragment's markers in view may
+                // be the body's hidden ones.
                 if (body.lostAtFrame >= fragment.bornFrame)
                     continue;
-                const std::optional<RigidTransform> rigFromBody = searchLost(body, seen_.span());
+                searchPoints_.clear();
+                for (const Member& m : fragment.members)
+                    if (m.visible && m.verified)
+                        searchPoints_.push_back(markers_[m.marker].position_rig_mm);
+                const std::optional<RigidTransform> rigFromBody =
+                    fitLayout(body, searchPoints_.span(), Members::Occluded);
                 if (!rigFromBody)
                     continue;
                 // The smaller goes into the larger: a body seen from a new side after it came
@@ -810,18 +812,159 @@ void ObjectCalibrator::mergeDuplicates() {
                 } else {
                     merge(body, fragment, fragment.rigFromObject.inverse() * *rigFromBody);
                 }
+                ++counters_.merged;
+                structureChanged_ = true;
+                break;
             }
+            if (!larger)
+                continue; // the pair is looked at from the other side
+            // Only markers established in both count: a new marker joins every object for a
+            // while, so sitting on both proves nothing until it has stayed with both.
+            std::size_t onBody = 0;
+            for (const Member& a : fragment.members) {
+                if (!a.visible || !a.verified || !established(a))
+                    continue;
+                const Vec3& p = markers_[a.marker].position_rig_mm;
+                for (const Member& m : body.members)
+                    if (m.verified && established(m) &&
+                        (body.rigFromObject.apply(m.model_mm) - p).squaredNorm() <= radius2) {
+                        ++onBody;
+                        break;
+                    }
+            }
+            if (onBody < kMergeInPlaceMin)
+                continue;
+            merge(fragment, body, body.rigFromObject.inverse() * fragment.rigFromObject);
             ++counters_.merged;
             structureChanged_ = true;
             break;
         }
     }
+    mergeByLayout();
 }
 
-void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& intoFromFrom) {
+void ObjectCalibrator::mergeByLayout() {
+    // A lost body whose layout a posed object repeats, the two never seen apart, is that object:
+    // it came back and was not recognised in time. One layout search per check, taking the posed
+    // objects in turn: a search is bounded but not cheap, and a duplicate that is there now is
+    // there at the next check too.
+    const std::size_t count = objects_.size();
+    for (std::size_t step = 0; step < count; ++step) {
+        const std::size_t f = (nextShapeSearch_ + step) % count;
+        Object& fragment = objects_[f];
+        if (!fragment.active || !fragment.posed)
+            continue;
+        // The fragment's layout: its established members, in its own frame.
+        searchPoints_.clear();
+        for (const Member& m : fragment.members)
+            if (m.verified && established(m))
+                searchPoints_.push_back(m.model_mm);
+        if (searchPoints_.size() < kRefindMinMarkers)
+            continue;
+        nextShapeSearch_ = f + 1;
+        for (std::size_t b = 0; b < count; ++b) {
+            Object& body = objects_[b];
+            if (b == f || !body.active || body.posed || seenApart(f, b))
+                continue;
+            // A body lost soon after a re-base keeps most of what it learnt in its old frame;
+            // only one frame's members can be fitted at a time.
+            std::size_t verified = 0, oldFrame = 0;
+            for (const Member& m : body.members) {
+                verified += static_cast<std::size_t>(selects(Members::Verified, m));
+                oldFrame += static_cast<std::size_t>(selects(Members::OldFrame, m));
+            }
+            const Members layout = oldFrame > verified ? Members::OldFrame : Members::Verified;
+            if (std::max(verified, oldFrame) < kRefindMinMarkers) {
+                // Too few to carry a merge: a small lost piece whose every marker fits the
+                // posed object's layout is a stale duplicate of part of it, and goes.
+                piecePoints_.clear();
+                for (const Member& m : body.members)
+                    if (selects(layout, m) && established(m))
+                        piecePoints_.push_back(m.model_mm);
+                if (piecePoints_.size() >= kMergeInPlaceMin &&
+                    fitLayout(fragment, piecePoints_.span(), Members::Verified, kMergeInPlaceMin,
+                              1.0)) {
+                    deactivate(body);
+                    ++counters_.collapsed;
+                    structureChanged_ = true;
+                    return;
+                }
+                continue;
+            }
+            const std::optional<RigidTransform> fragmentFromBody =
+                fitLayout(body, searchPoints_.span(), layout);
+            if (!fragmentFromBody)
+                continue;
+            // Into the posed object, whose frame is the current one; the body's members of the
+            // other frame cannot be placed and are dropped.
+            merge(body, fragment, *fragmentFromBody, layout);
+            ++counters_.merged;
+            structureChanged_ = true;
+            return;
+        }
+        return;
+    }
+}
+
+void ObjectCalibrator::recordObjectsSeenApart() {
+    // Where each posed object in view is: the centre and radius of its established members.
+    for (std::size_t i = 0; i < objects_.size(); ++i) {
+        const Object& o = objects_[i];
+        extentRadius_[i] = -1.0;
+        if (!o.active || !o.posed)
+            continue;
+        std::size_t inView = 0, establishedCount = 0;
+        Vec3 centre = Vec3::Zero();
+        for (const Member& m : o.members) {
+            if (!m.verified || !established(m))
+                continue;
+            inView += m.visible ? 1 : 0;
+            centre += o.rigFromObject.apply(m.model_mm);
+            ++establishedCount;
+        }
+        if (inView < 3)
+            continue;
+        centre /= static_cast<double>(establishedCount);
+        double radius = 0.0;
+        for (const Member& m : o.members)
+            if (m.verified && established(m))
+                radius = std::max(radius, (o.rigFromObject.apply(m.model_mm) - centre).norm());
+        extentCentre_[i] = centre;
+        extentRadius_[i] = radius;
+    }
+    // Two bodies in view at once whose spheres do not touch are two objects, even if their
+    // layouts agree (identical cubes).
+    for (std::size_t a = 0; a < objects_.size(); ++a)
+        for (std::size_t b = a + 1; b < objects_.size(); ++b)
+            if (extentRadius_[a] >= 0.0 && extentRadius_[b] >= 0.0 &&
+                (extentCentre_[a] - extentCentre_[b]).norm() >
+                    extentRadius_[a] + extentRadius_[b] + config_.reappearRadius_mm)
+                setSeenApart(a, b, true);
+}
+
+bool ObjectCalibrator::seenApart(std::size_t a, std::size_t b) const {
+    return (seenApart_[a * seenApartWords_ + b / 64] >> (b % 64)) & 1u;
+}
+
+void ObjectCalibrator::setSeenApart(std::size_t a, std::size_t b, bool apart) {
+    auto set = [&](std::size_t row, std::size_t column) {
+        std::uint64_t& word = seenApart_[row * seenApartWords_ + column / 64];
+        const std::uint64_t bit = std::uint64_t{1} << (column % 64);
+        word = apart ? (word | bit) : (word & ~bit);
+    };
+    set(a, b);
+    set(b, a);
+}
+
+void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& intoFromFrom,
+                             Members carry) {
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     FixedVector<std::size_t, MarkerSet::kCapacity> indexInto;
     for (const Member& a : from.members) {
+        if (!selects(carry, a)) {
+            indexInto.push_back(kNone);
+            continue;
+        }
         const Vec3 position = intoFromFrom.apply(a.model_mm);
         std::size_t match = kNone;
         double nearest2 = radius2;
@@ -888,6 +1031,9 @@ ObjectCalibrator::Object* ObjectCalibrator::newObject() {
         o.posed = false;
         o.bornFrame = counters_.frames;
         o.lostAtFrame = counters_.frames;
+        const auto slot = static_cast<std::size_t>(&o - objects_.data());
+        for (std::size_t other = 0; other < objects_.size(); ++other)
+            setSeenApart(slot, other, false);
         return &o;
     }
     return nullptr;

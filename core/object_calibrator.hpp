@@ -3,6 +3,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <vector>
@@ -231,10 +232,27 @@ private:
         return o.edges[edgeIndex(i, j)];
     }
     bool established(const Member& m) const { return m.framesReliable >= config_.minModelFrames; }
-    /// The first occluded, verified member of \a o that \a rigFromObject puts within the
-    /// reappearance radius of \a p_rig_mm; kNone when there is none.
-    std::size_t occludedMemberNear(const Object& o, const RigidTransform& rigFromObject,
-                                   const Vec3& p_rig_mm) const;
+    /// Which members of an object a layout search looks at or a merge carries over. Occluded:
+    /// verified and hidden. Verified: positions in the object's current frame. OldFrame:
+    /// established positions still in the frame before a re-base (see rebase()).
+    enum class Members : std::uint8_t { Any, Occluded, Verified, OldFrame };
+    bool selects(Members which, const Member& m) const {
+        switch (which) {
+        case Members::Any:
+            return true;
+        case Members::Occluded:
+            return m.verified && !m.visible;
+        case Members::Verified:
+            return m.verified;
+        case Members::OldFrame:
+            return !m.verified && established(m);
+        }
+        return false;
+    }
+    /// The first member of \a o (of those \a which names) that \a toFromObject puts
+    /// within the reappearance radius of \a p_mm; kNone when there is none.
+    std::size_t memberNear(const Object& o, const RigidTransform& toFromObject, const Vec3& p_mm,
+                           Members which) const;
 
     void bindTrackedMarkers(std::span<const TrackedMarker> tracked);
     void removeInvalidMarkers();
@@ -251,9 +269,25 @@ private:
     void insertNewMarkers(std::span<const TrackedMarker> tracked);
     void collapseObjects();
     void refind(Object& o);
-    std::optional<RigidTransform> searchLost(const Object& o, std::span<const std::size_t> seen);
+    /// Where \a o's layout (the members \a which names) lies among \a points
+    /// (mm, any frame): the transform from \a o's frame to the points' frame, found from
+    /// congruent triangles; nothing unless at least \a minPoints and \a share of the
+    /// points sit on members, all of them within the pose threshold after a joint fit.
+    std::optional<RigidTransform> fitLayout(const Object& o, std::span<const Vec3> points,
+                                            Members which,
+                                            std::size_t minPoints = kRefindMinMarkers,
+                                            double share = kRefindShare);
+    /// Two objects both posed at once in places too far apart to be one body (by the slots of
+    /// objects_): they may share a layout (identical objects) but are never merged by shape.
+    void recordObjectsSeenApart();
+    bool seenApart(std::size_t a, std::size_t b) const;
+    void setSeenApart(std::size_t a, std::size_t b, bool apart);
     void mergeDuplicates();
-    void merge(Object& from, Object& into, const RigidTransform& intoFromFrom);
+    void mergeByLayout();
+    /// Moves \a from's members (those \a carry names; the rest are dropped) into \a into, through
+    /// \a intoFromFrom, and deactivates \a from.
+    void merge(Object& from, Object& into, const RigidTransform& intoFromFrom,
+               Members carry = Members::Any);
 
     Object* newObject();
     void deactivate(Object& o);
@@ -293,7 +327,18 @@ private:
         std::size_t j = 0;
     };
     BoundedVector<MemberPair> memberPairs_;
-    BoundedVector<std::size_t> seen_;
+    /// Scratch of layout searches: the points searched for (mm), and a small piece's layout.
+    BoundedVector<Vec3> searchPoints_;
+    BoundedVector<Vec3> piecePoints_;
+    /// maxObjects x maxObjects bits: which objects were seen apart (recordObjectsSeenApart).
+    std::unique_ptr<std::uint64_t[]> seenApart_;
+    std::size_t seenApartWords_ = 0;
+    /// Scratch of recordObjectsSeenApart: per object slot, centre (rig, mm) and radius (mm) of its
+    /// established members when it is posed and in view, else a negative radius.
+    BoundedVector<Vec3> extentCentre_;
+    BoundedVector<double> extentRadius_;
+    /// Round-robin start of the shape searches of mergeDuplicates, one per check.
+    std::size_t nextShapeSearch_ = 0;
     std::uint32_t stampValue_ = 0;
     double edgeAlpha_ = 0.2;
     std::uint32_t nextMarkerId_ = 1;

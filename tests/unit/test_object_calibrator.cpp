@@ -208,6 +208,37 @@ TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
     EXPECT_GT(calibrator.counters().refound + calibrator.counters().merged, 0u);
 }
 
+TEST_F(TwoBodies, IdenticalBodiesSeenApartStayTwoWhenOneLeaves) {
+    // Two bodies with one layout, seen side by side; then one leaves for good. The lost one fits
+    // the other's layout exactly, but having been seen apart they are two objects, not one body
+    // that came back.
+    layouts[1] = layouts[0];
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::vector<Vec3> points, staying;
+    for (int f = 0; f < 3000; ++f) {
+        frame(f / 100.0, true, points);
+        if (f >= 1500) {
+            staying.clear();
+            const RigidTransform pose =
+                poseAt(f / 100.0, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0);
+            for (const Vec3& p : points)
+                if ((p - pose.translation_mm).norm() < 80.0)
+                    staying.push_back(p);
+            points.swap(staying);
+        }
+        calibrator.update(f / 100.0, points);
+    }
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    const std::size_t count = calibrator.exportModels(models);
+    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
+    for (std::size_t i = 0; i < count; ++i)
+        EXPECT_TRUE(sameShape(models[i].markers_model_mm.span(), layouts[0], 0.2))
+            << describe(std::span(models).first(count), layouts);
+}
+
 TEST(ObjectCalibrator, RefusesMoreMarkersPerObjectThanItsSetsHold) {
     CalibrationConfig config;
     config.maxMarkersPerObject = MarkerSet::kCapacity + 1;
