@@ -1147,8 +1147,16 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
             continue;
         chosen.clear();
         layout.clear();
+        // After a re-base an object's hidden members keep positions in the frame before it
+        // until they are seen again: a model takes the members of one frame, the larger group.
+        std::size_t current = 0, old = 0;
+        for (const Member& m : o.members) {
+            current += static_cast<std::size_t>(selects(Members::Verified, m) && established(m));
+            old += static_cast<std::size_t>(selects(Members::OldFrame, m));
+        }
+        const Members frame = old > current ? Members::OldFrame : Members::Verified;
         for (std::size_t i = 0; i < o.members.size(); ++i)
-            if (established(o.members[i]))
+            if (established(o.members[i]) && selects(frame, o.members[i]))
                 chosen.push_back(i);
         // One physical marker can have two identities in an object (lost, then born again
         // before its prediction caught it): the better-measured one goes into the model.
