@@ -779,10 +779,12 @@ void ObjectCalibrator::mergeDuplicates() {
     for (Object& fragment : objects_) {
         if (!fragment.active || !fragment.posed)
             continue;
-        std::size_t visibleVerified = 0;
+        // The fragment's markers in view (rig, mm), for the search in a lost body below.
+        searchPoints_.clear();
         for (const Member& m : fragment.members)
-            visibleVerified += m.visible && m.verified ? 1 : 0;
-        if (visibleVerified < kMergeInPlaceMin)
+            if (m.visible && m.verified)
+                searchPoints_.push_back(markers_[m.marker].position_rig_mm);
+        if (searchPoints_.size() < kMergeInPlaceMin)
             continue;
         for (Object& body : objects_) {
             if (&body == &fragment || !body.active)
@@ -795,10 +797,6 @@ void ObjectCalibrator::mergeDuplicates() {
                 // be the body's hidden ones.
                 if (body.lostAtFrame >= fragment.bornFrame)
                     continue;
-                searchPoints_.clear();
-                for (const Member& m : fragment.members)
-                    if (m.visible && m.verified)
-                        searchPoints_.push_back(markers_[m.marker].position_rig_mm);
                 const std::optional<RigidTransform> rigFromBody =
                     fitLayout(body, searchPoints_.span(), Members::Occluded);
                 if (!rigFromBody)

@@ -22,8 +22,9 @@ constexpr std::size_t kMaxNeighbours = 32;
 struct Neighbourhood {
     static constexpr float kFar = 1e9f;
     std::size_t count = 0;
-    // One slot beyond the list: the collecting sweep writes every candidate there and only counts
-    // the ones inside the region, which keeps its unpredictable test off the branch predictor.
+    // Room beyond the list (one slot, rounded up to a whole vector): the collecting sweep writes
+    // every candidate at the end and only counts the ones inside the region, which keeps its
+    // unpredictable test off the branch predictor.
     alignas(16) float x[kMaxNeighbours + 4];
     alignas(16) float y[kMaxNeighbours + 4];
 

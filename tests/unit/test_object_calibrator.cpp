@@ -68,9 +68,7 @@ protected:
     void frame(double t_s, bool selfOcclusion, std::vector<Vec3>& points) {
         points.clear();
         for (std::size_t k = 0; k < 2; ++k) {
-            const RigidTransform pose =
-                k == 0 ? poseAt(t_s, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0)
-                       : poseAt(t_s, {70.0, 10.0, 560.0}, {1.0, 0.3, -0.2}, -0.6, 1.3);
+            const RigidTransform pose = bodyPose(k, t_s);
             for (const Vec3& m : layouts[k]) {
                 const Vec3 p = pose.apply(m);
                 // Facing away from the cameras (at the rig origin): hidden behind the body.
@@ -82,13 +80,35 @@ protected:
         std::shuffle(points.begin(), points.end(), random);
     }
 
-    // Exports the models and checks there is exactly one of each body's shape; returns them.
-    std::vector<MarkerModel> expectOneModelPerBody(const ObjectCalibrator& calibrator,
-                                                   const CalibrationConfig& config) {
+    // Rig-from-object pose of body k at time t.
+    static RigidTransform bodyPose(std::size_t k, double t_s) {
+        return k == 0 ? poseAt(t_s, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0)
+                      : poseAt(t_s, {70.0, 10.0, 560.0}, {1.0, 0.3, -0.2}, -0.6, 1.3);
+    }
+
+    // The points of a frame at time t that belong to body 0 (within 80 mm of its centre).
+    static void keepBodyZero(double t_s, const std::vector<Vec3>& points, std::vector<Vec3>& out) {
+        out.clear();
+        const Vec3 centre = bodyPose(0, t_s).translation_mm;
+        for (const Vec3& p : points)
+            if ((p - centre).norm() < 80.0)
+                out.push_back(p);
+    }
+
+    // The models the calibrator exports now (room for four).
+    static std::vector<MarkerModel> exported(const ObjectCalibrator& calibrator,
+                                             const CalibrationConfig& config) {
         std::vector<MarkerModel> models;
         for (int i = 0; i < 4; ++i)
             models.emplace_back(config.maxMarkersPerObject);
         models.resize(calibrator.exportModels(models));
+        return models;
+    }
+
+    // Exports the models and checks there is exactly one of each body's shape; returns them.
+    std::vector<MarkerModel> expectOneModelPerBody(const ObjectCalibrator& calibrator,
+                                                   const CalibrationConfig& config) {
+        std::vector<MarkerModel> models = exported(calibrator, config);
         EXPECT_EQ(models.size(), 2u) << describe(models, layouts);
         for (int k = 0; k < 2; ++k)
             EXPECT_EQ(std::count_if(models.begin(), models.end(),
@@ -153,14 +173,11 @@ TEST_F(TwoBodies, ShortLivedReflectionsDoNotBecomeMarkers) {
         calibrator.update(f / 100.0, points);
     }
     EXPECT_GT(calibrator.counters().invalidRemoved, 20u);
-    std::vector<MarkerModel> models;
-    for (int i = 0; i < 4; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
+    const std::vector<MarkerModel> models = exported(calibrator, config);
+    ASSERT_EQ(models.size(), 2u) << describe(models, layouts);
     std::size_t total = 0;
-    for (std::size_t i = 0; i < count; ++i)
-        total += models[i].markers_model_mm.size();
+    for (const MarkerModel& model : models)
+        total += model.markers_model_mm.size();
     EXPECT_EQ(total, 22u);
 }
 
@@ -188,23 +205,14 @@ TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
     std::vector<Vec3> points, first;
     for (int f = 0; f < 3000; ++f) {
         frame(f / 100.0, true, points);
-        // Only body 0: drop the markers of body 1 (its layout is the second one).
-        first.clear();
-        const RigidTransform pose =
-            poseAt(f / 100.0, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0);
-        for (const Vec3& p : points)
-            if ((p - pose.translation_mm).norm() < 80.0)
-                first.push_back(p);
+        keepBodyZero(f / 100.0, points, first);
         const bool away = f >= 900 && f < 1100;
         calibrator.update(f / 100.0, away ? std::span<const Vec3>() : std::span<const Vec3>(first));
     }
-    std::vector<MarkerModel> models;
-    for (int i = 0; i < 4; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 1u) << describe(std::span(models).first(count), layouts);
+    const std::vector<MarkerModel> models = exported(calibrator, config);
+    ASSERT_EQ(models.size(), 1u) << describe(models, layouts);
     EXPECT_TRUE(sameShape(models[0].markers_model_mm.span(), layouts[0], 0.2))
-        << describe(std::span(models).first(count), layouts);
+        << describe(models, layouts);
     EXPECT_GT(calibrator.counters().refound + calibrator.counters().merged, 0u);
 }
 
@@ -219,24 +227,16 @@ TEST_F(TwoBodies, IdenticalBodiesSeenApartStayTwoWhenOneLeaves) {
     for (int f = 0; f < 3000; ++f) {
         frame(f / 100.0, true, points);
         if (f >= 1500) {
-            staying.clear();
-            const RigidTransform pose =
-                poseAt(f / 100.0, {-60.0, 0.0, 550.0}, {0.2, 1.0, 0.1}, 0.8, 0.0);
-            for (const Vec3& p : points)
-                if ((p - pose.translation_mm).norm() < 80.0)
-                    staying.push_back(p);
+            keepBodyZero(f / 100.0, points, staying);
             points.swap(staying);
         }
         calibrator.update(f / 100.0, points);
     }
-    std::vector<MarkerModel> models;
-    for (int i = 0; i < 4; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
-    ASSERT_EQ(count, 2u) << describe(std::span(models).first(count), layouts);
-    for (std::size_t i = 0; i < count; ++i)
-        EXPECT_TRUE(sameShape(models[i].markers_model_mm.span(), layouts[0], 0.2))
-            << describe(std::span(models).first(count), layouts);
+    const std::vector<MarkerModel> models = exported(calibrator, config);
+    ASSERT_EQ(models.size(), 2u) << describe(models, layouts);
+    for (const MarkerModel& model : models)
+        EXPECT_TRUE(sameShape(model.markers_model_mm.span(), layouts[0], 0.2))
+            << describe(models, layouts);
 }
 
 TEST(ObjectCalibrator, RefusesMoreMarkersPerObjectThanItsSetsHold) {
