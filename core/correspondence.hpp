@@ -136,6 +136,13 @@ public:
     bool solve(std::span<const int> left, std::span<const int> right, double minProximity,
                Proximity&& proximity, Accept&& accept) {
         constexpr auto kMax = static_cast<std::size_t>(kMaxCorrespondenceBlock);
+        if (left.size() == 1 && right.size() == 1) {
+            // Most blocks are a lone pair (markers that move less than their spacing): skip the
+            // matrix; the pair is its own mutual maximum.
+            if (proximity(left[0], right[0]) >= minProximity)
+                accept(left[0], right[0]);
+            return true;
+        }
         if (left.size() > kMax || right.size() > kMax) {
             for (const int l : left) {
                 int best = -1;

@@ -295,3 +295,43 @@ TEST(SlhSolver, ClosedFormTwoByTwoAgreesWithTheSvd) {
         EXPECT_EQ(closedForm, reference) << g;
     }
 }
+
+// Blocks whose shorter side is 3 or 4 take the polar factor by Newton's iteration instead of the
+// SVD: the pairs must be the SVD's, for blocks of full rank and for nearly rank-deficient ones
+// (which fall back to the SVD), square, tall and wide.
+TEST(SlhSolver, NewtonPolarFactorAgreesWithTheSvd) {
+    constexpr std::pair<Eigen::Index, Eigen::Index> kShapes[] = {{3, 3}, {4, 4}, {3, 4}, {4, 3},
+                                                                 {3, 7}, {8, 4}, {2, 3}, {5, 5}};
+    std::mt19937 random(11);
+    std::uniform_real_distribution<double> value(0.0, 1.0);
+    SlhSolver solver;
+    int nearlyDeficient = 0;
+    for (std::size_t trial = 0; trial < 8000; ++trial) {
+        const auto [rows, cols] = kShapes[trial % std::size(kShapes)];
+        ProximityBlock g(rows, cols);
+        for (Eigen::Index i = 0; i < rows * cols; ++i)
+            g.data()[i] = value(random);
+        if (trial % 5 == 0) {
+            // Two rows and two columns almost alike: blobs whose neighbourhoods look the same.
+            g.row(1) = g.row(0) * (1.0 + 1e-9 * value(random));
+            g.col(1) = g.col(0) * (1.0 + 1e-9 * value(random));
+            ++nearlyDeficient;
+        }
+        std::set<std::pair<int, int>> fast, reference;
+        solver.solve(g, 0.0, [&](int r, int c) { fast.insert({r, c}); });
+
+        const Eigen::MatrixXd dense = g;
+        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(dense,
+                                                    Eigen::ComputeThinU | Eigen::ComputeThinV);
+        const Eigen::MatrixXd p = svd.matrixU() * svd.matrixV().transpose();
+        for (Eigen::Index r = 0; r < rows; ++r) {
+            Eigen::Index c = 0, back = 0;
+            p.row(r).maxCoeff(&c);
+            p.col(c).maxCoeff(&back);
+            if (back == r)
+                reference.insert({static_cast<int>(r), static_cast<int>(c)});
+        }
+        EXPECT_EQ(fast, reference) << g;
+    }
+    EXPECT_EQ(nearlyDeficient, 1600);
+}
