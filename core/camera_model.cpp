@@ -72,6 +72,7 @@ Vec2 CameraModel::pixelFromNormalized(const Vec2& normalized) const {
 std::optional<Vec2> CameraModel::newtonUndistort(const Vec2& target, Vec2 estimate) const {
     constexpr int kMaxIterations = 30;
     constexpr double kTolerance = 1e-12;
+    constexpr double kNegligibleStep = 1e-8;
     for (int i = 0; i < kMaxIterations; ++i) {
         const DistortionTerms t = distortWithJacobian(intrinsics_.distortion, estimate);
         const Vec2 residual = t.distorted - target;
@@ -81,9 +82,14 @@ std::optional<Vec2> CameraModel::newtonUndistort(const Vec2& target, Vec2 estima
         // A non-positive Jacobian means the model folds back here: no unique undistorted point.
         if (!(det > 1e-9))
             return std::nullopt;
-        estimate -= t.jacobian.inverse() * residual;
+        const Vec2 step = t.jacobian.inverse() * residual;
+        estimate -= step;
         if (!estimate.allFinite())
             return std::nullopt;
+        // Newton converges quadratically: a step this small leaves an error of about its square,
+        // far below the tolerance, so the distortion need not be evaluated once more to see it.
+        if (step.norm() < kNegligibleStep)
+            return estimate;
     }
     const Vec2 residual = distortNormalized(estimate) - target;
     if (residual.norm() < 1e-9)
