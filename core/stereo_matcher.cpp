@@ -81,6 +81,10 @@ struct StereoMatcher::Prepared {
             sortedX[c] = std::make_unique<double[]>(maxBlobs);
             sortedY[c] = std::make_unique<double[]>(maxBlobs);
         }
+        columnOf = std::make_unique<int[]>(maxBlobs);
+        gridX = std::make_unique<double[]>(maxBlobs);
+        gridY = std::make_unique<double[]>(maxBlobs);
+        gridRank = std::make_unique<int[]>(maxBlobs);
     }
     std::size_t count[2] = {0, 0};
     std::unique_ptr<Vec2[]> rectified[2];
@@ -95,6 +99,16 @@ struct StereoMatcher::Prepared {
     std::unique_ptr<double[]> sortedX[2];
     std::unique_ptr<double[]> sortedY[2];
     std::size_t validCount[2] = {0, 0};
+
+    /// Region R's columns (filled for one camera at a time): the column of each blob in byRow
+    /// order, and the blobs column after column, each column in row order.
+    static constexpr int kMaxColumns = 64;
+    std::unique_ptr<int[]> columnOf;
+    int columnStart[kMaxColumns + 1] = {};
+    int columnNext[kMaxColumns] = {};
+    std::unique_ptr<double[]> gridX, gridY;
+    /// Position in byRow order of each blob in the columns.
+    std::unique_ptr<int[]> gridRank;
 
     double rowOf(int camera, int sorted) const { return sortedY[camera][idx(sorted)]; }
     /// First position in byRow[camera] whose rectified y is >= \a y.
@@ -170,32 +184,82 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
 }
 
 void StereoMatcher::collectNeighbours(int camera) {
-    // Region R: the blobs within half of S in x and y; when a crowded region holds more than the
-    // list can, the nearest rows are kept.
+    // Region R: the blobs within half of S in x and y. The blobs are dealt into columns at least
+    // that wide, each in row order, so a blob's region lies in its own column and the two beside
+    // it; in each, the stretch of rows within reach only moves down as the blobs do. Scanning
+    // three columns instead of whole rows skips the blobs that are far to the side.
     Prepared& p = *prepared_;
     const double half = 0.5 * config_.neighbourhood_px;
     const int valid = static_cast<int>(p.validCount[camera]);
     for (std::size_t i = 0; i < p.count[camera]; ++i)
         p.neighbours[camera][i].clear();
+    if (valid == 0)
+        return;
     const double* xs = p.sortedX[camera].get();
     const double* ys = p.sortedY[camera].get();
-    int first = 0;
+    const auto [minX, maxX] = std::minmax_element(xs, xs + valid);
+    const double columnWidth =
+        std::max(half, (*maxX - *minX) / static_cast<double>(Prepared::kMaxColumns));
+    const int columns =
+        std::min(Prepared::kMaxColumns, static_cast<int>((*maxX - *minX) / columnWidth) + 1);
+    int* columnOf = p.columnOf.get();
+    int* start = p.columnStart;
+    std::fill(start, start + columns + 1, 0);
     for (int s = 0; s < valid; ++s) {
-        Neighbourhood& list = p.neighbours[camera][idx(p.byRow[camera][idx(s)])];
+        columnOf[s] = std::min(columns - 1, static_cast<int>((xs[s] - *minX) / columnWidth));
+        ++start[columnOf[s] + 1];
+    }
+    for (int c = 0; c < columns; ++c)
+        start[c + 1] += start[c];
+    int* next = p.columnNext;
+    std::copy(start, start + columns, next);
+    double* gridX = p.gridX.get();
+    double* gridY = p.gridY.get();
+    int* gridRank = p.gridRank.get();
+    for (int s = 0; s < valid; ++s) {
+        const int k = next[columnOf[s]]++;
+        gridX[k] = xs[s];
+        gridY[k] = ys[s];
+        gridRank[k] = s;
+    }
+    // Region R is symmetric, so each pair is found once, from the blob higher in the image, and
+    // entered in both lists. next[c] now moves on to column c's first blob below the current one.
+    std::copy(start, start + columns, next);
+    Neighbourhood* lists = p.neighbours[camera].get();
+    const int* byRow = p.byRow[camera].get();
+    for (int s = 0; s < valid; ++s) {
+        Neighbourhood& list = lists[idx(byRow[s])];
         const double x = xs[s], y = ys[s];
-        // The rows of region R form one stretch of the sorted order, whose start only moves on
-        // as the blobs go down the image; take the stretch in one sweep.
-        while (y - ys[first] >= half)
-            ++first;
-        std::size_t count = 0;
-        for (int k = first; k < valid && ys[k] - y < half && count <= kMaxNeighbours; ++k) {
-            const double dx = xs[k] - x;
-            list.x[count] = static_cast<float>(dx);
-            list.y[count] = static_cast<float>(ys[k] - y);
-            count += static_cast<std::size_t>(k != s && std::abs(dx) < half);
+        for (int c = std::max(0, columnOf[s] - 1); c <= std::min(columns - 1, columnOf[s] + 1);
+             ++c) {
+            int first = next[c];
+            while (first < start[c + 1] && gridRank[first] <= s)
+                ++first;
+            next[c] = first;
+            for (int k = first; k < start[c + 1] && gridY[k] - y < half; ++k) {
+                const auto dx = static_cast<float>(gridX[k] - x);
+                const auto dy = static_cast<float>(gridY[k] - y);
+                const auto inside = static_cast<std::size_t>(std::abs(gridX[k] - x) < half);
+                // Every candidate is written past the end and only counted when inside, which
+                // keeps this unpredictable test off the branch predictor; a full list keeps
+                // counting (to be seen as full below) but writes into its spare slot.
+                Neighbourhood& other = lists[idx(byRow[gridRank[k]])];
+                const std::size_t slot = std::min(list.count, kMaxNeighbours);
+                list.x[slot] = dx;
+                list.y[slot] = dy;
+                list.count += inside;
+                const std::size_t otherSlot = std::min(other.count, kMaxNeighbours);
+                other.x[otherSlot] = -dx;
+                other.y[otherSlot] = -dy;
+                other.count += inside;
+            }
         }
-        list.count = count;
-        if (count > kMaxNeighbours) {
+    }
+
+    for (int s = 0; s < valid; ++s) {
+        Neighbourhood& list = lists[idx(byRow[s])];
+        const double x = xs[s], y = ys[s];
+        if (list.count > kMaxNeighbours) {
             // More than the list holds: keep the nearest rows, scanning outward from the blob's.
             list.clear();
             int up = s - 1, down = s + 1;

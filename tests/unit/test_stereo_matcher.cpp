@@ -83,6 +83,75 @@ TEST(BipartiteBlocks, GroupsConnectedElements) {
     EXPECT_EQ(rights, (std::set<std::vector<int>>{{0, 1}, {3}}));
 }
 
+// The proximity against eq. 1-4 written out by brute force on the rectified blob centres: the
+// region R of each blob (the other blobs within S/2 in x and in y; when there are more than 32, the
+// 32 nearest in y), eq. 2's mean closest distance, eq. 4's product of Gaussians. A dense cluster
+// gives some blobs more neighbours than a list holds.
+TEST(StereoMatcher, ProximityFollowsTheEquationsOfThePaper) {
+    constexpr std::size_t kListCapacity = 32;
+    std::vector<Vec3> points = randomMarkers(60, 3);
+    std::mt19937 random(8);
+    std::uniform_real_distribution<double> clusterXy(0.0, 45.0), clusterZ(500.0, 510.0);
+    for (int i = 0; i < 45; ++i)
+        points.push_back({clusterXy(random), clusterXy(random), clusterZ(random)});
+    const BlobSets sets = project(points, 0.3, 3);
+    const StereoConfig config;
+    StereoMatcher matcher(simRig(), config, 256);
+    matcher.prepare(sets.camera[0], sets.camera[1]);
+
+    std::vector<std::optional<Vec2>> rectified[2];
+    for (int c = 0; c < 2; ++c)
+        for (const Blob& b : sets.camera[c])
+            rectified[c].push_back(simRig().rectify(c, b.centre_px));
+    const double half = 0.5 * config.neighbourhood_px;
+    auto regionOf = [&](int c, std::size_t i) {
+        std::vector<Vec2> offsets;
+        for (std::size_t k = 0; k < rectified[c].size(); ++k)
+            if (k != i && rectified[c][k]) {
+                const Vec2 d = *rectified[c][k] - *rectified[c][i];
+                if (std::abs(d.x()) < half && std::abs(d.y()) < half)
+                    offsets.push_back(d);
+            }
+        if (offsets.size() > kListCapacity) {
+            std::sort(offsets.begin(), offsets.end(), [](const Vec2& a, const Vec2& b) {
+                return std::abs(a.y()) < std::abs(b.y());
+            });
+            offsets.resize(kListCapacity);
+        }
+        return offsets;
+    };
+    std::size_t compared = 0, crowded = 0;
+    for (std::size_t i = 0; i < sets.camera[0].size(); ++i) {
+        const std::vector<Vec2> region0 = regionOf(0, i);
+        crowded += region0.size() == kListCapacity;
+        for (std::size_t j = 0; j < sets.camera[1].size(); ++j) {
+            const double g = matcher.proximity(static_cast<int>(i), static_cast<int>(j));
+            if (g == 0.0)
+                continue; // outside the band or the disparity range
+            const std::vector<Vec2> region1 = regionOf(1, j);
+            const auto& smaller = region0.size() <= region1.size() ? region0 : region1;
+            const auto& larger = region0.size() <= region1.size() ? region1 : region0;
+            double sum = 0.0;
+            for (const Vec2& q : smaller) {
+                double closest = std::numeric_limits<double>::infinity();
+                for (const Vec2& r : larger)
+                    closest = std::min(closest, (q - r).norm());
+                sum += closest;
+            }
+            const double d = smaller.empty() ? 0.0 : sum / static_cast<double>(smaller.size());
+            const double dy = rectified[0][i]->y() - rectified[1][j]->y();
+            const double expected =
+                std::exp(-dy * dy / (2.0 * config.sigmaEpipolar_px * config.sigmaEpipolar_px) -
+                         d * d / (2.0 * config.sigmaSimilarity_px * config.sigmaSimilarity_px));
+            // The matcher keeps neighbour offsets in float.
+            EXPECT_NEAR(g, expected, 1e-5 * expected + 1e-12) << i << " " << j;
+            ++compared;
+        }
+    }
+    EXPECT_GT(compared, 100u);
+    EXPECT_GT(crowded, 10u);
+}
+
 TEST(StereoMatcher, BlocksGiveTheSameAnswerAsTheWholeMatrix) {
     for (unsigned seed = 1; seed <= 20; ++seed) {
         // Up to 48 markers: the whole matrix then fits one SVD of the solver's own fixed size.
