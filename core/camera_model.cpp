@@ -76,7 +76,7 @@ std::optional<Vec2> CameraModel::newtonUndistort(const Vec2& target, Vec2 estima
     for (int i = 0; i < kMaxIterations; ++i) {
         const DistortionTerms t = distortWithJacobian(intrinsics_.distortion, estimate);
         const Vec2 residual = t.distorted - target;
-        if (residual.norm() < kTolerance)
+        if (residual.squaredNorm() < kTolerance * kTolerance)
             return estimate;
         const double det = t.jacobian.determinant();
         // A non-positive Jacobian means the model folds back here: no unique undistorted point.
@@ -88,7 +88,7 @@ std::optional<Vec2> CameraModel::newtonUndistort(const Vec2& target, Vec2 estima
             return std::nullopt;
         // Newton converges quadratically: a step this small leaves an error of about its square,
         // far below the tolerance, so the distortion need not be evaluated once more to see it.
-        if (step.norm() < kNegligibleStep)
+        if (step.squaredNorm() < kNegligibleStep * kNegligibleStep)
             return estimate;
     }
     const Vec2 residual = distortNormalized(estimate) - target;
