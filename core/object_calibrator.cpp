@@ -841,6 +841,17 @@ void ObjectCalibrator::mergeDuplicates() {
     mergeByLayout();
 }
 
+ObjectCalibrator::FrameGroup ObjectCalibrator::largerFrameGroup(const Object& o) const {
+    std::size_t current = 0, old = 0;
+    for (const Member& m : o.members) {
+        current += static_cast<std::size_t>(selects(Members::Verified, m) && established(m));
+        old += static_cast<std::size_t>(selects(Members::OldFrame, m));
+    }
+    if (old > current)
+        return {Members::OldFrame, old};
+    return {Members::Verified, current};
+}
+
 void ObjectCalibrator::mergeByLayout() {
     // A lost body whose layout a posed object repeats, the two never seen apart, is that object:
     // it came back and was not recognised in time. One layout search per check, taking the posed
@@ -866,13 +877,9 @@ void ObjectCalibrator::mergeByLayout() {
                 continue;
             // A body lost soon after a re-base keeps most of what it learnt in its old frame;
             // only one frame's members can be fitted at a time.
-            std::size_t verified = 0, oldFrame = 0;
-            for (const Member& m : body.members) {
-                verified += static_cast<std::size_t>(selects(Members::Verified, m));
-                oldFrame += static_cast<std::size_t>(selects(Members::OldFrame, m));
-            }
-            const Members layout = oldFrame > verified ? Members::OldFrame : Members::Verified;
-            if (std::max(verified, oldFrame) < kRefindMinMarkers) {
+            const FrameGroup group = largerFrameGroup(body);
+            const Members layout = group.members;
+            if (group.established < kRefindMinMarkers) {
                 // Too few to carry a merge: a small lost piece whose every marker fits the
                 // posed object's layout is a stale duplicate of part of it, and goes.
                 piecePoints_.clear();
@@ -1147,12 +1154,7 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
         layout.clear();
         // After a re-base an object's hidden members keep positions in the frame before it
         // until they are seen again: a model takes the members of one frame, the larger group.
-        std::size_t current = 0, old = 0;
-        for (const Member& m : o.members) {
-            current += static_cast<std::size_t>(selects(Members::Verified, m) && established(m));
-            old += static_cast<std::size_t>(selects(Members::OldFrame, m));
-        }
-        const Members frame = old > current ? Members::OldFrame : Members::Verified;
+        const Members frame = largerFrameGroup(o).members;
         for (std::size_t i = 0; i < o.members.size(); ++i)
             if (established(o.members[i]) && selects(frame, o.members[i]))
                 chosen.push_back(i);

@@ -267,6 +267,13 @@ private:
     void removeGhosts(Object& o);
     void recogniseReappearing(std::span<const TrackedMarker> tracked);
     void insertNewMarkers(std::span<const TrackedMarker> tracked);
+    /// The members of one of \a o's frames (after a re-base its hidden members keep the frame
+    /// before it until seen again): the frame with more established members, and how many.
+    struct FrameGroup {
+        Members members;
+        std::size_t established;
+    };
+    FrameGroup largerFrameGroup(const Object& o) const;
     void collapseObjects();
     void refind(Object& o);
     /// Where \a o's layout (the members \a which names) lies among \a points
