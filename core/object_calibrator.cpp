@@ -896,8 +896,21 @@ void ObjectCalibrator::mergeByLayout() {
                 }
                 continue;
             }
-            const std::optional<RigidTransform> fragmentFromBody =
-                fitLayout(body, searchPoints_.span(), layout);
+            // The smaller layout is searched for in the larger one, so that most of the smaller
+            // one must lie on the larger: a small lost piece of a large posed object, or a small
+            // posed piece of a large lost body.
+            std::optional<RigidTransform> fragmentFromBody;
+            if (group.established < searchPoints_.size()) {
+                piecePoints_.clear();
+                for (const Member& m : body.members)
+                    if (selects(layout, m) && established(m))
+                        piecePoints_.push_back(m.model_mm);
+                if (const std::optional<RigidTransform> bodyFromFragment =
+                        fitLayout(fragment, piecePoints_.span(), Members::Verified))
+                    fragmentFromBody = bodyFromFragment->inverse();
+            } else {
+                fragmentFromBody = fitLayout(body, searchPoints_.span(), layout);
+            }
             if (!fragmentFromBody)
                 continue;
             // Into the posed object, whose frame is the current one; the body's members of the
