@@ -17,6 +17,7 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , stride_(std::min(config.maxMarkersPerObject, MarkerSet::kCapacity))
     , tracker_(config.tracking)
     , clustering_(config.maxCliques, config.cliqueStepBudget)
+    , joinedClusters_(config.maxCliques)
     , markers_(config.maxMarkers)
     , byTrackerId_(config.maxMarkers)
     , knownOfTracked_(config.tracking.maxMarkers)
@@ -418,7 +419,8 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
         return; // still dirty: tried again next frame
     }
     o.dirty = false;
-    const std::span<const MarkerSet> clusters = clustering_.clusters();
+    joinClustersSharingATriangle(o, clustering_.clusters());
+    const std::span<const MarkerSet> clusters = joinedClusters_.span();
     if (clusters.size() == 1 && (clusters[0] | pending) == all)
         return;
     structureChanged_ = true;
@@ -475,6 +477,57 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
         deactivate(o);
     else
         fitPose(o, clusters.size() > 1 ? Remeasure::NewMembers : Remeasure::None);
+}
+
+void ObjectCalibrator::joinClustersSharingATriangle(const Object& o,
+                                                    std::span<const MarkerSet> clusters) {
+    // Each cluster is rigid; two that share three markers not on one line are rigid with each
+    // other, whether or not those three are a face of a pyramid in both. Without this a body
+    // whose parts are bridged only that way splits, is merged back in place (its markers sit on
+    // the object's) and splits again, every few frames, and the bridge markers never settle.
+    joinedClusters_.clear();
+    for (const MarkerSet& c : clusters)
+        joinedClusters_.push_back(c); // room for all: there are no more clusters than cliques
+    bool joined = true;
+    while (joined) {
+        joined = false;
+        for (std::size_t a = 0; a < joinedClusters_.size() && !joined; ++a)
+            for (std::size_t b = a + 1; b < joinedClusters_.size() && !joined; ++b) {
+                if (!spansATriangle(o, joinedClusters_[a] & joinedClusters_[b]))
+                    continue;
+                joinedClusters_[a] |= joinedClusters_[b];
+                // Keep the clustering's order (the first cluster wins ties below).
+                for (std::size_t c = b; c + 1 < joinedClusters_.size(); ++c)
+                    joinedClusters_[c] = joinedClusters_[c + 1];
+                joinedClusters_.pop_back();
+                joined = true;
+            }
+    }
+}
+
+bool ObjectCalibrator::spansATriangle(const Object& o, const MarkerSet& shared) const {
+    // Positions of one frame only (a member not verified since a re-base is in the old one).
+    FixedVector<Vec3, MarkerSet::kCapacity> points;
+    shared.forEach([&](std::size_t i) {
+        if (o.members[i].verified)
+            points.push_back(o.members[i].model_mm);
+    });
+    if (points.size() < 3)
+        return false;
+    std::size_t far = 1;
+    for (std::size_t i = 2; i < points.size(); ++i)
+        if ((points[i] - points[0]).squaredNorm() > (points[far] - points[0]).squaredNorm())
+            far = i;
+    const Vec3 axis = points[far] - points[0];
+    if (axis.norm() < kMinTriangleHeight_mm)
+        return false;
+    const Vec3 direction = axis.normalized();
+    for (const Vec3& p : points) {
+        const Vec3 offset = p - points[0];
+        if ((offset - offset.dot(direction) * direction).norm() >= kMinTriangleHeight_mm)
+            return true;
+    }
+    return false;
 }
 
 void ObjectCalibrator::removeGhosts(Object& o) {

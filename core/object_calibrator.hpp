@@ -274,6 +274,10 @@ private:
         std::size_t established;
     };
     FrameGroup largerFrameGroup(const Object& o) const;
+    /// Fills joinedClusters_ with \a clusters, those sharing three members not on a line joined.
+    void joinClustersSharingATriangle(const Object& o, std::span<const MarkerSet> clusters);
+    /// True when \a shared holds three members of \a o (current frame) not on one line.
+    bool spansATriangle(const Object& o, const MarkerSet& shared) const;
     void collapseObjects();
     void refind(Object& o);
     /// Where \a o's layout (the members \a which names) lies among \a points
@@ -310,6 +314,8 @@ private:
     std::size_t stride_ = 0;
     MarkerTracker tracker_;
     PyramidClustering clustering_;
+    /// The clustering's clusters with those rigidly linked through three shared members joined.
+    BoundedVector<MarkerSet> joinedClusters_;
     CalibrationCounters counters_{};
     std::vector<Object> objects_;
     BoundedVector<KnownMarker> markers_;
@@ -362,6 +368,9 @@ private:
     static constexpr double kRefindShare = 0.6;
     /// Established markers of two posed objects that must coincide to make them one body.
     static constexpr std::size_t kMergeInPlaceMin = 4;
+    /// Three shared markers link two clusters rigidly when one stands this far off the line
+    /// through the other two (mm): a few times the pose threshold.
+    static constexpr double kMinTriangleHeight_mm = 5.0;
     /// A member missing from this share of at least this many frames in which it was expected
     /// is stale (see removeGhosts).
     static constexpr std::uint32_t kGhostEvidence_frames = 300;
