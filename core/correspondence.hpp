@@ -98,8 +98,10 @@ public:
     }
 
 private:
-    /// \brief U V^T of the SVD G = U S V^T. Out of line so that one translation unit alone
-    /// instantiates Eigen's SVD (it dominated the build time of every user of this header).
+    /// \brief U V^T of the SVD G = U S V^T: by Newton's iteration for the polar factor when the
+    /// block's shorter side is 3 or 4 and it is well away from rank deficiency, by the SVD
+    /// otherwise. Out of line so that one translation unit alone instantiates Eigen's SVD (it
+    /// dominated the build time of every user of this header).
     const ProximityBlock& orthogonalFactor(const ProximityBlock& proximity);
 
     template <typename Score, typename Matrix, typename Accept>
