@@ -38,7 +38,7 @@ struct CalibrationConfig {
     /// A marker within this of its place under the object's pose is reliable for the pose (mm).
     double poseInlier_mm = 1.5;
     /// Model positions are running means over about this many frames.
-    std::uint32_t modelAverage_frames = 1000;
+    std::uint32_t modelAverage_frames = 200;
     /// A marker enters the exported model once seen this many frames as a reliable member.
     std::uint32_t minModelFrames = 30;
     /// An exported model has at least this many markers.
