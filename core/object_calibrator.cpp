@@ -932,13 +932,14 @@ void ObjectCalibrator::mergeByLayout() {
             // only one frame's members can be fitted at a time.
             const FrameGroup group = largerFrameGroup(body);
             const Members layout = group.members;
+            // The body's layout: the established members of that frame, in its own frame.
+            piecePoints_.clear();
+            for (const Member& m : body.members)
+                if (selects(layout, m) && established(m))
+                    piecePoints_.push_back(m.model_mm);
             if (group.established < kRefindMinMarkers) {
                 // Too few to carry a merge: a small lost piece whose every marker fits the
                 // posed object's layout is a stale duplicate of part of it, and goes.
-                piecePoints_.clear();
-                for (const Member& m : body.members)
-                    if (selects(layout, m) && established(m))
-                        piecePoints_.push_back(m.model_mm);
                 if (piecePoints_.size() >= kMergeInPlaceMin &&
                     fitLayout(fragment, piecePoints_.span(), Members::Verified, kMergeInPlaceMin,
                               1.0)) {
@@ -954,10 +955,6 @@ void ObjectCalibrator::mergeByLayout() {
             // posed piece of a large lost body.
             std::optional<RigidTransform> fragmentFromBody;
             if (group.established < searchPoints_.size()) {
-                piecePoints_.clear();
-                for (const Member& m : body.members)
-                    if (selects(layout, m) && established(m))
-                        piecePoints_.push_back(m.model_mm);
                 if (const std::optional<RigidTransform> bodyFromFragment =
                         fitLayout(fragment, piecePoints_.span(), Members::Verified))
                     fragmentFromBody = bodyFromFragment->inverse();
