@@ -62,6 +62,23 @@ std::vector<Vec3> randomMarkers(int count, unsigned seed) {
     return points;
 }
 
+// The reference for the solver's shortcuts: the pairs of Scott and Longuet-Higgins from Eigen's
+// SVD of the whole block (P = U V^T, mutual maxima of P; no proximity threshold).
+std::set<std::pair<int, int>> svdPairs(const ProximityBlock& g) {
+    const Eigen::MatrixXd dense = g;
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(dense, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    const Eigen::MatrixXd p = svd.matrixU() * svd.matrixV().transpose();
+    std::set<std::pair<int, int>> pairs;
+    for (Eigen::Index r = 0; r < p.rows(); ++r) {
+        Eigen::Index c = 0, back = 0;
+        p.row(r).maxCoeff(&c);
+        p.col(c).maxCoeff(&back);
+        if (back == r)
+            pairs.insert({static_cast<int>(r), static_cast<int>(c)});
+    }
+    return pairs;
+}
+
 } // namespace
 
 TEST(BipartiteBlocks, GroupsConnectedElements) {
@@ -347,21 +364,9 @@ TEST(SlhSolver, ClosedFormTwoByTwoAgreesWithTheSvd) {
         ProximityBlock g(2, 2);
         for (Eigen::Index i = 0; i < 4; ++i)
             g.data()[i] = value(random);
-        std::set<std::pair<int, int>> closedForm, reference;
+        std::set<std::pair<int, int>> closedForm;
         solver.solve(g, 0.0, [&](int r, int c) { closedForm.insert({r, c}); });
-
-        const Eigen::Matrix2d dense = g;
-        const Eigen::JacobiSVD<Eigen::Matrix2d> svd(dense,
-                                                    Eigen::ComputeFullU | Eigen::ComputeFullV);
-        const Eigen::Matrix2d p = svd.matrixU() * svd.matrixV().transpose();
-        for (int r = 0; r < 2; ++r) {
-            Eigen::Index c = 0, back = 0;
-            p.row(r).maxCoeff(&c);
-            p.col(c).maxCoeff(&back);
-            if (back == r)
-                reference.insert({r, static_cast<int>(c)});
-        }
-        EXPECT_EQ(closedForm, reference) << g;
+        EXPECT_EQ(closedForm, svdPairs(g)) << g;
     }
 }
 
@@ -386,21 +391,9 @@ TEST(SlhSolver, NewtonPolarFactorAgreesWithTheSvd) {
             g.col(1) = g.col(0) * (1.0 + 1e-9 * value(random));
             ++nearlyDeficient;
         }
-        std::set<std::pair<int, int>> fast, reference;
+        std::set<std::pair<int, int>> fast;
         solver.solve(g, 0.0, [&](int r, int c) { fast.insert({r, c}); });
-
-        const Eigen::MatrixXd dense = g;
-        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(dense,
-                                                    Eigen::ComputeThinU | Eigen::ComputeThinV);
-        const Eigen::MatrixXd p = svd.matrixU() * svd.matrixV().transpose();
-        for (Eigen::Index r = 0; r < rows; ++r) {
-            Eigen::Index c = 0, back = 0;
-            p.row(r).maxCoeff(&c);
-            p.col(c).maxCoeff(&back);
-            if (back == r)
-                reference.insert({static_cast<int>(r), static_cast<int>(c)});
-        }
-        EXPECT_EQ(fast, reference) << g;
+        EXPECT_EQ(fast, svdPairs(g)) << g;
     }
     EXPECT_EQ(nearlyDeficient, 1600);
 }
