@@ -140,6 +140,8 @@ public:
         bool established = false;
         /// Rig frame (mm): where it is seen, or predicted when occluded and the object is posed.
         Vec3 position_rig_mm = Vec3::Zero();
+        /// Its learnt position, object-graph frame (mm).
+        Vec3 model_mm = Vec3::Zero();
     };
     /// \brief Call \a visit(const MemberView&) for every member of every object.
     template <typename Visit>
@@ -155,6 +157,7 @@ public:
                 v.established = established(m);
                 v.position_rig_mm = m.visible ? markers_[m.marker].position_rig_mm
                                               : o.rigFromObject.apply(m.model_mm);
+                v.model_mm = m.model_mm;
                 visit(v);
             }
         }

@@ -19,6 +19,7 @@
 #include <CLI/CLI.hpp>
 
 #include "core/object_calibrator.hpp"
+#include "core/rigid_fit.hpp"
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
@@ -127,6 +128,9 @@ int main(int argc, char** argv) {
     double requireRms = -1.0;
     bool requireComplete = false;
     bool verbose = false;
+    bool trace = false;
+    std::int64_t traceEvery = 0;
+    std::int64_t traceObject = -1, traceFrom = 0, traceTo = 0;
     app.add_option("--scene", sceneName);
     app.add_option("--frames", frames)->check(CLI::PositiveNumber);
     app.add_option("--seed", seed);
@@ -137,6 +141,13 @@ int main(int argc, char** argv) {
     app.add_flag("--require-complete", requireComplete,
                  "every marker in view long enough found exactly once, no stray models");
     app.add_flag("--verbose", verbose, "print the objects every second");
+    app.add_flag(
+        "--trace", trace,
+        "at the end, list members more than 1.5 mm from the true marker they were seen as");
+    app.add_option("--trace-every", traceEvery, "with --trace, list them every this many frames");
+    app.add_option("--trace-object", traceObject, "print this object's visible members per frame");
+    app.add_option("--trace-from", traceFrom, "first frame of --trace-object");
+    app.add_option("--trace-to", traceTo, "last frame of --trace-object");
     CalibrationConfig config;
     app.add_option("--edge-break", config.edgeBreak_mm, "edge break threshold (mm)");
     app.add_option("--edge-window", config.edgeWindow_frames, "N of the running distance");
@@ -163,8 +174,87 @@ int main(int argc, char** argv) {
         framesSeen.emplace_back(o.object.markers.size(), 0);
     }
 
+    struct Seen {
+        std::pair<int, int> first{-1, -1};
+        std::pair<int, int> last{-1, -1};
+        std::int64_t firstFrame = 0;
+        std::int64_t lastFrame = 0;
+        std::int64_t frames = 0;
+        int relabelled = 0;
+    };
+    std::map<std::uint32_t, Seen> seenAs;
     std::vector<Vec3> points;
     sim::Observation observation;
+    auto printOffMembers = [&](std::int64_t frame) {
+        // Per object: its members with the true marker each was last seen as; the object's
+        // learnt layout is laid onto the true layout by a fit that drops members over the
+        // threshold, so a member's error is its place in the model, whatever the pose now.
+        struct Traced {
+            ObjectCalibrator::MemberView view;
+            Seen seen;
+        };
+        std::map<std::uint32_t, std::vector<Traced>> byObject;
+        calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
+            const auto it = seenAs.find(v.markerId);
+            if (it != seenAs.end())
+                byObject[v.objectId].push_back({v, it->second});
+        });
+        std::printf("members off at frame %lld:\n", static_cast<long long>(frame));
+        for (const auto& [id, traced] : byObject) {
+            std::map<int, int> votes;
+            for (const Traced& t : traced)
+                ++votes[t.seen.last.first];
+            const int object = std::max_element(votes.begin(), votes.end(), [](auto a, auto b) {
+                                   return a.second < b.second;
+                               })->first;
+            auto truthOf = [&](const Traced& t) {
+                return layouts[static_cast<std::size_t>(object)]
+                              [static_cast<std::size_t>(t.seen.last.second)];
+            };
+            std::vector<bool> use(traced.size());
+            for (std::size_t i = 0; i < traced.size(); ++i)
+                use[i] = traced[i].seen.last.first == object;
+            RigidTransform layoutFromModel{};
+            for (int round = 0; round < 3; ++round) {
+                std::vector<Vec3> from, to;
+                for (std::size_t i = 0; i < traced.size(); ++i)
+                    if (use[i]) {
+                        from.push_back(traced[i].view.model_mm);
+                        to.push_back(truthOf(traced[i]));
+                    }
+                const std::optional<RigidFit> fit = fitRigid(from, to);
+                if (!fit)
+                    break;
+                layoutFromModel = fit->transform;
+                for (std::size_t i = 0; i < traced.size(); ++i)
+                    use[i] = traced[i].seen.last.first == object &&
+                             (layoutFromModel.apply(traced[i].view.model_mm) - truthOf(traced[i]))
+                                     .norm() < kMatch_mm;
+            }
+            int off = 0;
+            for (const Traced& t : traced) {
+                const double error =
+                    t.seen.last.first == object
+                        ? (layoutFromModel.apply(t.view.model_mm) - truthOf(t)).norm()
+                        : -1.0;
+                if (error >= 0.0 && error < kMatch_mm)
+                    continue;
+                ++off;
+                std::printf(
+                    "  #%u marker %u: seen as %d:%d (first %d:%d) frames %lld-%lld (%lld, "
+                    "relabelled %d), %s%s, %.1f mm off in the model\n",
+                    id, t.view.markerId, t.seen.last.first, t.seen.last.second, t.seen.first.first,
+                    t.seen.first.second, static_cast<long long>(t.seen.firstFrame),
+                    static_cast<long long>(t.seen.lastFrame), static_cast<long long>(t.seen.frames),
+                    t.seen.relabelled, t.view.visible ? "visible" : "hidden",
+                    t.view.established ? " established" : "", error);
+                if (error < 0.0)
+                    std::printf("    (a marker of another object)\n");
+            }
+            std::printf("  #%u: %zu members on object %d, %d off\n", id, traced.size(), object,
+                        off);
+        }
+    };
     std::vector<int> visible;
     const auto perSecond = static_cast<std::int64_t>(world.scene().frameRate_hz);
     std::vector<std::pair<double, std::vector<MarkerModel>>> checkpoints;
@@ -172,6 +262,51 @@ int main(int argc, char** argv) {
     for (std::int64_t f = 0; f < frames; ++f) {
         simFrames.next(static_cast<std::uint64_t>(f), observation, points);
         calibrator.update(observation.time_s, points);
+        if (trace) {
+            // The true marker each calibration marker was seen as: first and last label, frames.
+            calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
+                if (!v.visible)
+                    return;
+                for (const sim::MarkerView& m : observation.markers)
+                    if ((m.position_rig_mm - v.position_rig_mm).norm() < 1.0) {
+                        Seen& seen = seenAs[v.markerId];
+                        const std::pair<int, int> label{m.object, m.marker};
+                        if (seen.frames == 0) {
+                            seen.first = label;
+                            seen.firstFrame = f;
+                        }
+                        if (seen.last != label && seen.frames > 0)
+                            ++seen.relabelled;
+                        seen.last = label;
+                        seen.lastFrame = f;
+                        ++seen.frames;
+                    }
+            });
+            if (traceEvery > 0 && (f + 1) % traceEvery == 0)
+                printOffMembers(f + 1);
+            if (traceObject >= 0 && f >= traceFrom && f <= traceTo) {
+                std::vector<CalibrationObjectView> views(config.maxObjects);
+                const std::size_t n = calibrator.objectViews(views);
+                for (std::size_t i = 0; i < n; ++i) {
+                    if (views[i].id != static_cast<std::uint32_t>(traceObject))
+                        continue;
+                    std::printf("%lld #%u%s:", static_cast<long long>(f), views[i].id,
+                                views[i].posed ? "" : " lost");
+                    calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
+                        if (v.objectId != views[i].id || !v.visible)
+                            return;
+                        const auto it = seenAs.find(v.markerId);
+                        const double residual =
+                            (views[i].rigFromObject.apply(v.model_mm) - v.position_rig_mm).norm();
+                        std::printf(" %u=%d:%d%s/%.1f", v.markerId,
+                                    it != seenAs.end() ? it->second.last.first : -1,
+                                    it != seenAs.end() ? it->second.last.second : -1,
+                                    v.established ? "e" : "", residual);
+                    });
+                    std::printf("\n");
+                }
+            }
+        }
         sim::separatelyVisible(observation, visible);
         for (const int source : visible)
             if (static_cast<std::size_t>(source) < observation.markers.size()) {
@@ -248,6 +383,39 @@ int main(int argc, char** argv) {
         std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
                     models[i].markers_model_mm.size(), models[i].edges.size(), models[i].sMin,
                     models[i].sameShapeAs >= 0 ? " (same shape as another)" : "");
+    if (verbose) {
+        // Where each false marker lies: its distance from the nearest marker of the layout its
+        // model matches best (a marker learnt out of place, or one of another body).
+        for (std::size_t i = 0; i < count; ++i) {
+            test::ModelAlignment best;
+            std::size_t bestObject = 0;
+            for (std::size_t k = 0; k < layouts.size(); ++k) {
+                test::ModelAlignment a = test::alignModel(models[i], layouts[k], kMatch_mm);
+                if (a.matched > best.matched) {
+                    best = a;
+                    bestObject = k;
+                }
+            }
+            std::string off;
+            for (std::size_t m = 0; m < best.layoutMarkerOf.size(); ++m) {
+                if (best.layoutMarkerOf[m] >= 0)
+                    continue;
+                const Vec3 p = best.layoutFromModel.apply(models[i].markers_model_mm[m]);
+                double nearest = 1e9;
+                for (const Vec3& q : layouts[bestObject])
+                    nearest = std::min(nearest, (p - q).norm());
+                char text[32];
+                std::snprintf(text, sizeof text, " %.1f", nearest);
+                off += text;
+            }
+            if (!off.empty())
+                std::printf(
+                    "  model %zu on object %zu: false markers at (mm from the nearest):%s\n", i,
+                    bestObject, off.c_str());
+        }
+    }
+    if (trace)
+        printOffMembers(frames);
     if (completeAt >= 0.0)
         std::printf("complete after %.0f s of motion\n", completeAt);
     else
