@@ -247,13 +247,14 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
         // (new markers go to every object) must not take its pose over.
         votes_.push_back(established(member) ? kEstablishedVote : 1.0);
     }
-    std::optional<RigidTransform> pose = consensusPose();
-    if (!pose) {
+    const std::optional<ConsensusPose> consensus = consensusPose();
+    if (!consensus) {
         if (visible >= config_.minModelMarkers)
             rebase(o);
         return;
     }
-    const RigidTransform objectFromRig = pose->inverse();
+    const RigidTransform& pose = consensus->rigFromObject;
+    const RigidTransform objectFromRig = pose.inverse();
     for (Member& member : o.members) {
         if (!member.visible)
             continue;
@@ -261,7 +262,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
         const bool again = remeasure == Remeasure::All ||
                            (remeasure == Remeasure::NewMembers && !established(member));
         if (!member.verified ||
-            (again && (pose->apply(member.model_mm) - p).norm() > config_.poseInlier_mm)) {
+            (again && (pose.apply(member.model_mm) - p).norm() > config_.poseInlier_mm)) {
             // Measured under another frame (a re-based object, or a part that split off): it is
             // measured again in this one, and has to earn its place in the model again.
             member.model_mm = objectFromRig.apply(p);
@@ -270,12 +271,12 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             member.verified = true;
             member.recentResidual_mm = 0.0;
         }
-        const double residual = (pose->apply(member.model_mm) - p).norm();
+        const double residual = (pose.apply(member.model_mm) - p).norm();
         member.inlier = residual <= config_.poseInlier_mm;
         member.recentResidual_mm += edgeAlpha_ * (residual - member.recentResidual_mm);
     }
     o.posed = true;
-    o.rigFromObject = *pose;
+    o.rigFromObject = pose;
     if (remeasure == Remeasure::All)
         for (Member& member : o.members)
             if (!member.visible)
@@ -289,7 +290,10 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             continue;
         member.recentResidual_mm = 0.0;
         for (std::size_t j = 0; j < o.members.size(); ++j) {
-            if (j == i || !o.members[j].inlier)
+            // Only the members that made the pose are known to be rigid with it: two new
+            // members of another body drift from it alike, and their edge must hold.
+            if (j == i || !o.members[j].inlier ||
+                (consensus->fromEstablished && !established(o.members[j])))
                 continue;
             Edge& e = edge(o, i, j);
             if (e.state == EdgeState::Active) {
@@ -301,7 +305,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
     }
 }
 
-std::optional<RigidTransform> ObjectCalibrator::consensusPose() {
+std::optional<ObjectCalibrator::ConsensusPose> ObjectCalibrator::consensusPose() {
     const std::size_t n = fitFrom_.size();
     if (n < 3)
         return std::nullopt;
@@ -323,7 +327,7 @@ std::optional<RigidTransform> ObjectCalibrator::consensusPose() {
         best = all->transform;
         bestCount = countInliers(all->transform);
         if (bestCount == allVotes)
-            return best;
+            return refit(n);
     }
     // Some members disagree (an object splitting, stale positions): the pose that most members
     // agree with wins, tried from spread-out triples (deterministic, so runs repeat).
@@ -355,15 +359,35 @@ std::optional<RigidTransform> ObjectCalibrator::consensusPose() {
         if ((best->apply(fitFrom_[i]) - fitTo_[i]).norm() <= config_.poseInlier_mm) {
             fitFrom_[kept] = fitFrom_[i];
             fitTo_[kept] = fitTo_[i];
+            votes_[kept] = votes_[i];
             ++kept;
         }
-    if (kept < 3)
+    return refit(kept);
+}
+
+std::optional<ObjectCalibrator::ConsensusPose> ObjectCalibrator::refit(std::size_t count) {
+    // The pose comes from the reliable (established) members when three of them fix it, as the
+    // paper's step 5 has it. New members agree within the pose threshold but are not yet known to
+    // be rigid with the object: markers of another body passing close agree for a while, and in
+    // an unweighted fit they drag the pose by up to that threshold; every new marker placed
+    // through that pose then joins the model that far out of place.
+    std::size_t reliable = 0;
+    for (std::size_t i = 0; i < count; ++i)
+        if (votes_[i] == kEstablishedVote) {
+            std::swap(fitFrom_[reliable], fitFrom_[i]);
+            std::swap(fitTo_[reliable], fitTo_[i]);
+            std::swap(votes_[reliable], votes_[i]);
+            ++reliable;
+        }
+    if (reliable >= 3)
+        if (const std::optional<RigidFit> fit =
+                fitRigid(std::span(fitFrom_.data(), reliable), std::span(fitTo_.data(), reliable)))
+            return ConsensusPose{fit->transform, true};
+    const std::optional<RigidFit> fit =
+        fitRigid(std::span(fitFrom_.data(), count), std::span(fitTo_.data(), count));
+    if (!fit)
         return std::nullopt;
-    const std::optional<RigidFit> refit =
-        fitRigid(std::span(fitFrom_.data(), kept), std::span(fitTo_.data(), kept));
-    if (!refit)
-        return std::nullopt;
-    return refit->transform;
+    return ConsensusPose{fit->transform, false};
 }
 
 void ObjectCalibrator::rebase(Object& o) {
@@ -506,11 +530,16 @@ void ObjectCalibrator::joinClustersSharingATriangle(const Object& o,
 }
 
 bool ObjectCalibrator::spansATriangle(const Object& o, const MarkerSet& shared) const {
-    // Positions of one frame only (a member not verified since a re-base is in the old one).
+    // Only members whose whereabouts are known now count: their edges to both clusters are
+    // measured. A member hidden all the while two bodies moved apart keeps its unmeasured edges
+    // to both and would join them. Positions of one frame only (a member not verified since a
+    // re-base is in the old one).
     FixedVector<Vec3, MarkerSet::kCapacity> points;
     shared.forEach([&](std::size_t i) {
-        if (o.members[i].verified)
-            points.push_back(o.members[i].model_mm);
+        const Member& m = o.members[i];
+        const bool known = m.visible || (o.posed && m.wasInlier && established(m));
+        if (m.verified && known)
+            points.push_back(m.model_mm);
     });
     if (points.size() < 3)
         return false;

@@ -264,7 +264,17 @@ private:
     /// established (the part that keeps the object), or all of them (a part that splits off).
     enum class Remeasure { None, NewMembers, All };
     void fitPose(Object& o, Remeasure remeasure = Remeasure::None);
-    std::optional<RigidTransform> consensusPose();
+    /// An object's pose (rig from object-graph frame, mm) and whether only established members
+    /// made it.
+    struct ConsensusPose {
+        RigidTransform rigFromObject;
+        bool fromEstablished = false;
+    };
+    /// The pose most of fitFrom_/fitTo_ agree with (weighted by votes_), refitted by refit().
+    std::optional<ConsensusPose> consensusPose();
+    /// Least-squares pose of the first \a count pairs of fitFrom_/fitTo_ (which it reorders):
+    /// of their established members alone when three of them (not on a line) fix it, else of all.
+    std::optional<ConsensusPose> refit(std::size_t count);
     void rebase(Object& o);
     void clusterObject(std::size_t objectIndex);
     void removeGhosts(Object& o);
