@@ -161,10 +161,7 @@ void ObjectCalibrator::removeInvalidMarkers() {
 void ObjectCalibrator::updateObject(Object& o) {
     for (Member& member : o.members)
         member.visible = markers_[member.marker].visible;
-    const bool wasPosed = o.posed;
     fitPose(o);
-    if (wasPosed && !o.posed)
-        o.lostAtFrame = counters_.frames;
 
     // Where each member is now: seen, or predicted by the pose when it was reliable the last
     // time it was seen. A visible marker that moves against an occluded one's prediction breaks
@@ -228,6 +225,7 @@ void ObjectCalibrator::updateObject(Object& o) {
 }
 
 void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
+    const bool wasPosed = o.posed;
     o.posed = false;
     fitFrom_.clear();
     fitTo_.clear();
@@ -251,6 +249,10 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
     if (!consensus) {
         if (visible >= config_.minModelMarkers)
             rebase(o);
+        // Every loss counts, the one in a split too: a merge takes a fragment's markers for a
+        // lost body's only when the fragment was born after the body was lost.
+        if (wasPosed && !o.posed)
+            o.lostAtFrame = counters_.frames;
         return;
     }
     const RigidTransform& pose = consensus->rigFromObject;
