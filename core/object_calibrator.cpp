@@ -969,11 +969,13 @@ void ObjectCalibrator::mergeByLayout() {
                 if (selects(layout, m) && established(m))
                     piecePoints_.push_back(m.model_mm);
             if (group.established < kRefindMinMarkers) {
-                // Too few to carry a merge: a small lost piece whose every marker fits the
-                // posed object's layout is a stale duplicate of part of it, and goes.
+                // Too few to carry a merge: a small lost piece whose markers fit the posed
+                // object's layout, all or all but one in four, is a stale duplicate of part of
+                // it, and goes. (A piece formed while two bodies still moved together can hold
+                // a marker of the other; it fits neither whole, and no pose finds it again.)
                 if (piecePoints_.size() >= kMergeInPlaceMin &&
                     fitLayout(fragment, piecePoints_.span(), Members::Verified, kMergeInPlaceMin,
-                              1.0)) {
+                              0.75)) {
                     deactivate(body);
                     ++counters_.collapsed;
                     structureChanged_ = true;
