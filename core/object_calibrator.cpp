@@ -171,12 +171,11 @@ void ObjectCalibrator::updateObject(Object& o) {
     positionNow_.clear();
     whereabouts_.clear();
     for (const Member& m : o.members) {
-        const bool predictable = o.posed && m.verified && m.wasInlier && established(m);
         positionNow_.push_back(m.visible ? markers_[m.marker].position_rig_mm
                                          : o.rigFromObject.apply(m.model_mm));
-        whereabouts_.push_back(m.visible     ? Whereabouts::Seen
-                               : predictable ? Whereabouts::Predicted
-                                             : Whereabouts::Unknown);
+        whereabouts_.push_back(m.visible           ? Whereabouts::Seen
+                               : predictable(o, m) ? Whereabouts::Predicted
+                                                   : Whereabouts::Unknown);
     }
     for (std::size_t i = 0; i < n; ++i) {
         if (whereabouts_[i] == Whereabouts::Unknown)
@@ -539,8 +538,7 @@ bool ObjectCalibrator::spansATriangle(const Object& o, const MarkerSet& shared) 
     FixedVector<Vec3, MarkerSet::kCapacity> points;
     shared.forEach([&](std::size_t i) {
         const Member& m = o.members[i];
-        const bool known = m.visible || (o.posed && m.wasInlier && established(m));
-        if (m.verified && known)
+        if (m.verified && (m.visible || predictable(o, m)))
             points.push_back(m.model_mm);
     });
     if (points.size() < 3)

@@ -235,6 +235,11 @@ private:
         return o.edges[edgeIndex(i, j)];
     }
     bool established(const Member& m) const { return m.framesReliable >= config_.minModelFrames; }
+    /// An occluded member whose place the object's pose predicts: established, in the current
+    /// frame, and agreeing with the pose the last time it was seen.
+    bool predictable(const Object& o, const Member& m) const {
+        return o.posed && m.verified && m.wasInlier && established(m);
+    }
     /// Which members of an object a layout search looks at or a merge carries over. Occluded:
     /// verified and hidden. Verified: positions in the object's current frame. OldFrame:
     /// established positions still in the frame before a re-base (see rebase()).
