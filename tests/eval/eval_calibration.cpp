@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -46,7 +47,21 @@ struct Report {
     std::size_t models = 0;
     std::size_t falseMarkers = 0; // model markers on no true marker
     std::size_t strayModels = 0;  // models that match no object
+    /// Per model: the object its layout matches best, and how far each of its false markers
+    /// lies from that object's nearest marker after the alignment (mm).
+    std::vector<std::size_t> objectOfModel;
+    std::vector<std::vector<double>> falseMarkerDistances_mm;
 };
+
+// The true marker (object, marker) seen at a rig position (mm), if any is within 1 mm.
+std::optional<std::pair<int, int>> trueMarkerAt(const sim::Observation& observation,
+                                                const Vec3& p_rig_mm) {
+    std::optional<std::pair<int, int>> label;
+    for (const sim::MarkerView& m : observation.markers)
+        if ((m.position_rig_mm - p_rig_mm).norm() < 1.0)
+            label = std::pair{m.object, m.marker};
+    return label;
+}
 
 Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vector<Vec3>>& layouts,
                 const std::vector<std::vector<bool>>& expected) {
@@ -75,12 +90,23 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
                 bestObject = k;
             }
         }
+        const std::size_t k = bestObject;
+        r.objectOfModel.push_back(k);
+        std::vector<double>& falseAt = r.falseMarkerDistances_mm.emplace_back();
+        for (std::size_t i = 0; i < best.layoutMarkerOf.size(); ++i) {
+            if (best.layoutMarkerOf[i] >= 0 && best.matched >= 4)
+                continue;
+            const Vec3 p = best.layoutFromModel.apply(model.markers_model_mm[i]);
+            double nearest = std::numeric_limits<double>::infinity();
+            for (const Vec3& q : layouts[k])
+                nearest = std::min(nearest, (p - q).norm());
+            falseAt.push_back(nearest);
+        }
         if (best.matched < 4) {
             ++r.strayModels;
             r.falseMarkers += model.markers_model_mm.size();
             continue;
         }
-        const std::size_t k = bestObject;
         ++r.objects[k].models;
         for (std::size_t i = 0; i < best.layoutMarkerOf.size(); ++i) {
             if (best.layoutMarkerOf[i] < 0) {
@@ -267,20 +293,20 @@ int main(int argc, char** argv) {
             calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
                 if (!v.visible)
                     return;
-                for (const sim::MarkerView& m : observation.markers)
-                    if ((m.position_rig_mm - v.position_rig_mm).norm() < 1.0) {
-                        Seen& seen = seenAs[v.markerId];
-                        const std::pair<int, int> label{m.object, m.marker};
-                        if (seen.frames == 0) {
-                            seen.first = label;
-                            seen.firstFrame = f;
-                        }
-                        if (seen.last != label && seen.frames > 0)
-                            ++seen.relabelled;
-                        seen.last = label;
-                        seen.lastFrame = f;
-                        ++seen.frames;
-                    }
+                const std::optional<std::pair<int, int>> label =
+                    trueMarkerAt(observation, v.position_rig_mm);
+                if (!label)
+                    return;
+                Seen& seen = seenAs[v.markerId];
+                if (seen.frames == 0) {
+                    seen.first = *label;
+                    seen.firstFrame = f;
+                }
+                if (seen.last != *label && seen.frames > 0)
+                    ++seen.relabelled;
+                seen.last = *label;
+                seen.lastFrame = f;
+                ++seen.frames;
             });
             if (traceEvery > 0 && (f + 1) % traceEvery == 0)
                 printOffMembers(f + 1);
@@ -330,11 +356,11 @@ int main(int argc, char** argv) {
                 calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
                     if (!v.visible)
                         return;
-                    std::string label = "?";
-                    for (const sim::MarkerView& m : observation.markers)
-                        if ((m.position_rig_mm - v.position_rig_mm).norm() < 1.0)
-                            label = std::to_string(m.object) + ":" + std::to_string(m.marker);
-                    held[v.objectId] += " " + label;
+                    const std::optional<std::pair<int, int>> label =
+                        trueMarkerAt(observation, v.position_rig_mm);
+                    held[v.objectId] += label ? " " + std::to_string(label->first) + ":" +
+                                                    std::to_string(label->second)
+                                              : std::string(" ?");
                 });
                 for (const auto& [id, labels] : held)
                     std::printf("     #%u:%s\n", id, labels.c_str());
@@ -383,37 +409,20 @@ int main(int argc, char** argv) {
         std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
                     models[i].markers_model_mm.size(), models[i].edges.size(), models[i].sMin,
                     models[i].sameShapeAs >= 0 ? " (same shape as another)" : "");
-    if (verbose) {
-        // Where each false marker lies: its distance from the nearest marker of the layout its
-        // model matches best (a marker learnt out of place, or one of another body).
+    if (verbose)
         for (std::size_t i = 0; i < count; ++i) {
-            test::ModelAlignment best;
-            std::size_t bestObject = 0;
-            for (std::size_t k = 0; k < layouts.size(); ++k) {
-                test::ModelAlignment a = test::alignModel(models[i], layouts[k], kMatch_mm);
-                if (a.matched > best.matched) {
-                    best = a;
-                    bestObject = k;
-                }
-            }
+            // Where each false marker lies: a marker learnt out of place, or one of another body.
             std::string off;
-            for (std::size_t m = 0; m < best.layoutMarkerOf.size(); ++m) {
-                if (best.layoutMarkerOf[m] >= 0)
-                    continue;
-                const Vec3 p = best.layoutFromModel.apply(models[i].markers_model_mm[m]);
-                double nearest = 1e9;
-                for (const Vec3& q : layouts[bestObject])
-                    nearest = std::min(nearest, (p - q).norm());
+            for (const double d : final.falseMarkerDistances_mm[i]) {
                 char text[32];
-                std::snprintf(text, sizeof text, " %.1f", nearest);
+                std::snprintf(text, sizeof text, " %.1f", d);
                 off += text;
             }
             if (!off.empty())
                 std::printf(
                     "  model %zu on object %zu: false markers at (mm from the nearest):%s\n", i,
-                    bestObject, off.c_str());
+                    final.objectOfModel[i], off.c_str());
         }
-    }
     if (trace)
         printOffMembers(frames);
     if (completeAt >= 0.0)
