@@ -134,11 +134,13 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
     return r;
 }
 
+// Right models: every marker in view long enough in exactly one, no stray model, and no model
+// marker where its object has none.
 bool complete(const Report& r) {
     for (const ObjectReport& o : r.objects)
         if (o.expected > 0 && (o.found < o.expected || o.models != 1 || o.duplicates > 0))
             return false;
-    return r.strayModels == 0;
+    return r.strayModels == 0 && r.falseMarkers == 0;
 }
 
 } // namespace
@@ -165,7 +167,8 @@ int main(int argc, char** argv) {
     app.add_option("--require-objects", requireObjects, "models that must come out");
     app.add_option("--require-rms", requireRms, "maximum marker RMS error after alignment (mm)");
     app.add_flag("--require-complete", requireComplete,
-                 "every marker in view long enough found exactly once, no stray models");
+                 "every marker in view long enough found exactly once, no stray models, no false "
+                 "markers");
     app.add_flag("--verbose", verbose, "print the objects every second");
     app.add_flag(
         "--trace", trace,
@@ -432,7 +435,7 @@ int main(int argc, char** argv) {
     std::printf(
         "counters: born %llu, reappeared %llu, invalid %llu, edges broken %llu, splits %llu,"
         " collapsed %llu, merged %llu, deferred %llu, refound %llu (budget out %llu),"
-        " rebased %llu,"
+        " rebased %llu, stale removed %llu,"
         " overflow m/o/mem %llu/%llu/%llu\n",
         static_cast<unsigned long long>(c.markersBorn),
         static_cast<unsigned long long>(c.markersReappeared),
@@ -443,6 +446,7 @@ int main(int argc, char** argv) {
         static_cast<unsigned long long>(c.refound),
         static_cast<unsigned long long>(c.refindBudgetExhausted),
         static_cast<unsigned long long>(c.rebased),
+        static_cast<unsigned long long>(c.ghostsRemoved),
         static_cast<unsigned long long>(c.markerOverflow),
         static_cast<unsigned long long>(c.objectOverflow),
         static_cast<unsigned long long>(c.memberOverflow));
@@ -460,7 +464,7 @@ int main(int argc, char** argv) {
                 status = 1;
             }
     if (requireComplete && !complete(final)) {
-        std::printf("FAIL: models incomplete, duplicated or stray\n");
+        std::printf("FAIL: models incomplete, duplicated, stray or with false markers\n");
         status = 1;
     }
     return status;
