@@ -219,6 +219,11 @@ void ObjectCalibrator::updateObject(Object& o) {
         member.model_mm +=
             (objectFromRig.apply(markers_[member.marker].position_rig_mm) - member.model_mm) /
             member.samples;
+        member.seenFromSamples = std::min(member.seenFromSamples + 1, config_.modelAverage_frames);
+        const Vec3 towardsCameras_object =
+            objectFromRig.rotation * (-markers_[member.marker].position_rig_mm.normalized());
+        member.seenFrom_object +=
+            (towardsCameras_object - member.seenFrom_object) / member.seenFromSamples;
         ++member.framesReliable;
     }
 }
@@ -271,6 +276,8 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             member.framesReliable = 0;
             member.verified = true;
             member.recentResidual_mm = 0.0;
+            member.seenFrom_object = Vec3::Zero();
+            member.seenFromSamples = 0;
         }
         const double residual = (pose.apply(member.model_mm) - p).norm();
         member.inlier = residual <= config_.poseInlier_mm;
@@ -401,6 +408,8 @@ void ObjectCalibrator::rebase(Object& o) {
             member.samples = 1;
             member.framesReliable = 0;
             member.verified = true;
+            member.seenFrom_object = Vec3::Zero();
+            member.seenFromSamples = 0;
         } else {
             member.verified = false;
         }
@@ -560,13 +569,24 @@ bool ObjectCalibrator::spansATriangle(const Object& o, const MarkerSet& shared) 
 }
 
 void ObjectCalibrator::removeGhosts(Object& o) {
-    // A marker is expected when markers it was seen with are seen where the pose puts them. A
-    // member that is almost never there when expected has a position from a wrong frame (measured
-    // while its object was still mixed with another), so the marker it stood for came back as a
-    // new member long ago: the stale one goes.
+    // A marker is expected when the cameras (near the rig's origin, against the objects'
+    // distance) look at it as they did when it was seen, and markers it was seen with are seen
+    // where the pose puts them. A member that is almost never there
+    // when expected has a position from a wrong frame (measured while its object was still mixed
+    // with another), so the marker it stood for came back as a new member long ago: the stale
+    // one goes. (Markers seen with it being in view is not enough on its own: on a cube, the
+    // face beside it can be in view for seconds while its own face is turned away.)
+    const RigidTransform objectFromRig = o.rigFromObject.inverse();
     for (std::size_t i = o.members.size(); i-- > 0;) {
         Member& m = o.members[i];
         if (!m.verified || !established(m))
+            continue;
+        const double clarity = m.seenFrom_object.norm();
+        if (clarity < kMinFacingClarity)
+            continue;
+        const Vec3 towardsCameras_object =
+            objectFromRig.rotation * (-o.rigFromObject.apply(m.model_mm).normalized());
+        if (towardsCameras_object.dot(m.seenFrom_object) < kFacingCosine * clarity)
             continue;
         std::size_t partnersSeen = 0;
         for (std::size_t j = 0; j < o.members.size() && partnersSeen < 3; ++j)
@@ -1097,6 +1117,8 @@ void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& i
             copy.visible = a.visible;
             copy.inlier = a.inlier;
             copy.wasInlier = a.wasInlier;
+            copy.seenFrom_object = intoFromFrom.rotation * a.seenFrom_object;
+            copy.seenFromSamples = a.seenFromSamples;
             indexInto.push_back(into.members.size() - 1);
         } else {
             indexInto.push_back(kNone);
@@ -1160,6 +1182,8 @@ bool ObjectCalibrator::addMember(Object& o, std::size_t marker, const Vec3& mode
     member->inlier = false;
     member->wasInlier = false;
     member->recentResidual_mm = 0.0;
+    member->seenFrom_object = Vec3::Zero();
+    member->seenFromSamples = 0;
     member->expectedFrames = 0;
     member->missedFrames = 0;
     for (std::size_t j = 0; j < stride_; ++j)

@@ -202,7 +202,12 @@ private:
         bool wasInlier = false;
         /// Running mean of the distance from its place under the object's pose (mm).
         double recentResidual_mm = 0.0;
-        /// Frames in which markers seen with it were seen, and of those, frames it was not.
+        /// Mean unit direction from it towards the rig's origin (the cameras) while it was seen
+        /// agreeing with the pose, object-graph frame: where it faces, for removeGhosts.
+        Vec3 seenFrom_object = Vec3::Zero();
+        std::uint32_t seenFromSamples = 0;
+        /// Frames in which it faced the cameras as when it was seen and markers seen with it were
+        /// seen, and of those, frames it was not.
         std::uint32_t expectedFrames = 0;
         std::uint32_t missedFrames = 0;
         /// model_mm belongs to the object's current frame (false after a re-base, until seen).
@@ -393,6 +398,11 @@ private:
     /// is stale (see removeGhosts).
     static constexpr std::uint32_t kGhostEvidence_frames = 300;
     static constexpr double kGhostMissShare = 0.95;
+    /// A member is expected only while the cameras look at it from within this cone (cosine of
+    /// its half angle) about the mean direction it was seen from, when that mean is this clear
+    /// (its length: 1 when always seen from one direction).
+    static constexpr double kFacingCosine = 0.866;
+    static constexpr double kMinFacingClarity = 0.5;
     /// Inner steps of one search for a lost object, so that a flood of new points cannot stall.
     static constexpr std::size_t kRefindBudget = 200000;
     /// Objects are compared for duplicates every this many frames.
