@@ -200,6 +200,9 @@ private:
         bool inlier = false;
         /// It agreed with the object's pose the last frame it was seen: its prediction holds.
         bool wasInlier = false;
+        /// Running share (window N) of the frames it was seen, the object posed, in which it
+        /// agreed with the pose: a model takes a member only while most of them did.
+        double recentAgreement = 0.0;
         /// Running mean of the distance from its place under the object's pose (mm).
         double recentResidual_mm = 0.0;
         /// Mean unit direction from it towards the rig's origin (the cameras) while it was seen
