@@ -196,6 +196,8 @@ void ObjectCalibrator::updateObject(Object& o) {
             e.recent_mm += edgeAlpha_ * (d - e.recent_mm);
             if (std::abs(e.recent_mm - e.mean_mm) > config_.edgeBreak_mm) {
                 e.state = EdgeState::Broken;
+                e.brokenUnseen =
+                    whereabouts_[i] != Whereabouts::Seen || whereabouts_[j] != Whereabouts::Seen;
                 o.dirty = true;
                 ++counters_.edgesBroken;
             } else {
@@ -505,6 +507,8 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
         part->rigFromObject = whole.rigFromObject;
         fitPose(*part, Remeasure::All);
     }
+    if (clusters.size() > 1)
+        forgetAmbiguousHiddenMembers(o, clusters, kept);
     // Members of no cluster leave this object.
     const MarkerSet keep = (clusters.empty() ? MarkerSet{} : clusters[kept]) | pending;
     for (std::size_t i = n; i-- > 0;)
@@ -514,6 +518,44 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
         deactivate(o);
     else
         fitPose(o, clusters.size() > 1 ? Remeasure::NewMembers : Remeasure::None);
+}
+
+void ObjectCalibrator::forgetAmbiguousHiddenMembers(Object& o, std::span<const MarkerSet> clusters,
+                                                    std::size_t kept) {
+    // A hidden member of the part that keeps the object, rigid with an established member of
+    // another part before (a mature edge that holds, or broke only against the place this
+    // object's pose predicts for it), was hidden while the two moved apart: which one it is on
+    // is not known. Its predicted place follows this object's pose, so its edges to the other
+    // part broke however it moved, and kept established it would be exported here though it may
+    // be on the other body (three_cubes seed 31: three markers of one cube in another's model,
+    // last seen in the first 2.5 s when all were one object). It has to be seen again to count,
+    // as the hidden members of a part that splits off do. Only established members of the other
+    // part count: new markers of a body passing by join every object in view and leave again,
+    // and edges to them say nothing of where a hidden member is (over seeds 1-80 counting them
+    // too put the cube_sphere scene's median time to complete models up from 10 s to 14 s for
+    // no more right runs).
+    const auto mature = static_cast<std::uint32_t>(config_.edgeWindow_frames);
+    MarkerSet others;
+    for (std::size_t c = 0; c < clusters.size(); ++c)
+        if (c != kept)
+            others |= clusters[c];
+    others = others.minus(clusters[kept]);
+    clusters[kept].forEach([&](std::size_t i) {
+        Member& m = o.members[i];
+        if (m.visible || !established(m))
+            return;
+        bool ambiguous = false;
+        others.forEach([&](std::size_t j) {
+            if (!established(o.members[j]))
+                return;
+            const Edge& e = edge(o, i, j);
+            ambiguous = ambiguous ||
+                        (e.samples >= mature && (e.state == EdgeState::Active ||
+                                                 (e.state == EdgeState::Broken && e.brokenUnseen)));
+        });
+        if (ambiguous)
+            m.framesReliable = 0;
+    });
 }
 
 void ObjectCalibrator::joinClustersSharingATriangle(const Object& o,

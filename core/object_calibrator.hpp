@@ -175,6 +175,8 @@ private:
         std::uint32_t samples = 0;
         double mean_mm = 0.0;
         double recent_mm = 0.0;
+        /// It broke while one end was hidden and placed by the object's pose, not seen.
+        bool brokenUnseen = false;
     };
     /// A marker as calibration knows it, whether visible now or occluded.
     struct KnownMarker {
@@ -300,6 +302,10 @@ private:
         std::size_t established;
     };
     FrameGroup largerFrameGroup(const Object& o) const;
+    /// After a split into \a clusters: hidden members of the kept one that may be on another
+    /// part must be seen again to count.
+    void forgetAmbiguousHiddenMembers(Object& o, std::span<const MarkerSet> clusters,
+                                      std::size_t kept);
     /// Fills joinedClusters_ with \a clusters, those sharing three members not on a line joined.
     void joinClustersSharingATriangle(const Object& o, std::span<const MarkerSet> clusters);
     /// True when \a shared holds three members of \a o (current frame) not on one line.
