@@ -217,6 +217,9 @@ private:
         std::uint32_t missedFrames = 0;
         /// model_mm belongs to the object's current frame (false after a re-base, until seen).
         bool verified = true;
+        /// Established members that left the object as members of no cluster, rigid with this
+        /// one, since it was last seen: see forgetAmbiguousHiddenMembers and placeInDoubt.
+        std::uint32_t partnersLeftUnseen = 0;
     };
     struct Object {
         bool active = false;
@@ -245,6 +248,9 @@ private:
         return o.edges[edgeIndex(i, j)];
     }
     bool established(const Member& m) const { return m.framesReliable >= config_.minModelFrames; }
+    /// Three established members rigid with it left as members of no cluster while it was
+    /// hidden: it may be on the body they were, and goes into no model until seen again.
+    static bool placeInDoubt(const Member& m) { return m.partnersLeftUnseen >= 3; }
     /// An occluded member whose place the object's pose predicts: established, in the current
     /// frame, and agreeing with the pose the last time it was seen.
     bool predictable(const Object& o, const Member& m) const {
@@ -302,10 +308,10 @@ private:
         std::size_t established;
     };
     FrameGroup largerFrameGroup(const Object& o) const;
-    /// After a split into \a clusters: hidden members of the kept one that may be on another
-    /// part must be seen again to count.
+    /// When members outside \a keep leave \a o (to other \a clusters, or to none): hidden
+    /// members it keeps that may be on the body of those that leave must be seen again to count.
     void forgetAmbiguousHiddenMembers(Object& o, std::span<const MarkerSet> clusters,
-                                      std::size_t kept);
+                                      const MarkerSet& keep);
     /// Fills joinedClusters_ with \a clusters, those sharing three members not on a line joined.
     void joinClustersSharingATriangle(const Object& o, std::span<const MarkerSet> clusters);
     /// True when \a shared holds three members of \a o (current frame) not on one line.
