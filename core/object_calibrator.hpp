@@ -41,6 +41,9 @@ struct CalibrationConfig {
     std::uint32_t modelAverage_frames = 200;
     /// A marker enters the exported model once seen this many frames as a reliable member.
     std::uint32_t minModelFrames = 30;
+    /// A member hidden this many frames whose place no pose predicts leaves the clustering
+    /// (its edges are no longer measured): it stays with its object until it is seen.
+    std::uint32_t untrackedHidden_frames = 300;
     /// An exported model has at least this many markers.
     std::size_t minModelMarkers = 4;
     /// Bounds of one clustering run (see PyramidClustering).
@@ -220,6 +223,8 @@ private:
         /// Established members that left the object as members of no cluster, rigid with this
         /// one, since it was last seen: see forgetAmbiguousHiddenMembers and placeInDoubt.
         std::uint32_t partnersLeftUnseen = 0;
+        /// counters_.frames when it was last seen (or joined).
+        std::uint64_t lastSeenFrame = 0;
     };
     struct Object {
         bool active = false;
@@ -308,6 +313,8 @@ private:
         std::size_t established;
     };
     FrameGroup largerFrameGroup(const Object& o) const;
+    /// True when member \a i of \a o has mature edges to two members whose edge broke.
+    bool bridgesABreak(const Object& o, std::size_t i) const;
     /// When members outside \a keep leave \a o (to other \a clusters, or to none): hidden
     /// members it keeps that may be on the body of those that leave must be seen again to count.
     void forgetAmbiguousHiddenMembers(Object& o, std::span<const MarkerSet> clusters,

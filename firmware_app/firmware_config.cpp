@@ -244,6 +244,7 @@ void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSetting
     s.real("pose_inlier_mm", c.poseInlier_mm, 0.0, Section::kNoLimit, true);
     s.integer("model_average_frames", c.modelAverage_frames, 1, kMaxCount);
     s.integer("min_model_frames", c.minModelFrames, 1, kMaxCount);
+    s.integer("untracked_hidden_frames", c.untrackedHidden_frames, 0, kMaxCount);
     s.integer("min_model_markers", c.minModelMarkers, 4, 128);
     s.integer("max_cliques", c.maxCliques, 1, kMaxCount);
     s.integer("clique_step_budget", c.cliqueStepBudget, 1, 1LL << 40);
