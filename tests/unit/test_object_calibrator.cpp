@@ -29,6 +29,13 @@ RigidTransform poseAt(double t_s, const Vec3& centre, const Vec3& axis, double r
     return pose;
 }
 
+// Adds independent measurement noise to every point (mm).
+void addNoise(std::vector<Vec3>& points, std::mt19937& random,
+              std::normal_distribution<double>& noise) {
+    for (Vec3& p : points)
+        p += Vec3(noise(random), noise(random), noise(random));
+}
+
 std::vector<double> sortedDistances(std::span<const Vec3> points) {
     std::vector<double> d;
     for (std::size_t i = 0; i < points.size(); ++i)
@@ -344,8 +351,7 @@ TEST(ObjectCalibrator, AFaceTurnedAwayKeepsItsMarkers) {
         pose.translation_mm = Vec3(10.0 * std::sin(0.7 * t_s), 5.0 * std::cos(0.5 * t_s), 550.0);
         points.clear();
         visibleMarkers(box, pose, points);
-        for (Vec3& p : points)
-            p += Vec3(noise(random), noise(random), noise(random));
+        addNoise(points, random, noise);
         calibrator.update(t_s, points);
     }
     std::vector<MarkerModel> models;
@@ -356,6 +362,19 @@ TEST(ObjectCalibrator, AFaceTurnedAwayKeepsItsMarkers) {
     EXPECT_EQ(models[0].markers_model_mm.size(), box.size());
     EXPECT_TRUE(sameShape(models[0].markers_model_mm.span(), layout, 0.2));
     EXPECT_EQ(calibrator.counters().ghostsRemoved, 0u);
+}
+
+// Body A's pose (rig frame, mm) in the tests of two bodies that move apart.
+RigidTransform poseOfA(double t_s) {
+    return poseAt(t_s, {-50.0, 0.0, 560.0}, {0.2, 1.0, 0.1}, 0.6, 0.0);
+}
+
+// Body B slides away from A from 1.5 s on: its pose in A's frame (mm).
+RigidTransform slideAwayFromA(double t_s) {
+    const double apart_s = std::max(0.0, t_s - 1.5);
+    RigidTransform relative;
+    relative.translation_mm = Vec3(12.0 * apart_s, -8.0 * apart_s, 0.0);
+    return relative;
 }
 
 // How body B moves away from body A in twoBodiesWithAHiddenMarker, from 1.5 s on.
@@ -402,13 +421,11 @@ TwoBodiesResult twoBodiesWithAHiddenMarker(Parting parting, Hidden hidden) {
     std::vector<Vec3> points;
     for (int f = 0; f < 600; ++f) {
         const double t_s = f / 100.0;
-        const RigidTransform pose = poseAt(t_s, {-50.0, 0.0, 560.0}, {0.2, 1.0, 0.1}, 0.6, 0.0);
+        const RigidTransform pose = poseOfA(t_s);
         // B's motion in A's frame.
-        const double apart_s = std::max(0.0, t_s - 1.5);
-        RigidTransform relative;
-        if (parting == Parting::Slide) {
-            relative.translation_mm = Vec3(12.0 * apart_s, -8.0 * apart_s, 0.0);
-        } else {
+        RigidTransform relative = slideAwayFromA(t_s);
+        if (parting == Parting::Turn) {
+            const double apart_s = std::max(0.0, t_s - 1.5);
             // A turn about one of B's markers while B is carried off ever faster: no marker of
             // B stays near the turn's axis, so none moves with A for long.
             const Vec3& pivot_mm = bodyB[0];
@@ -425,8 +442,7 @@ TwoBodiesResult twoBodiesWithAHiddenMarker(Parting parting, Hidden hidden) {
         for (std::size_t i = 0; i < bodyB.size(); ++i)
             if (!(hiding && hidden == Hidden::OfBForGood && i == kHiddenOfB))
                 points.push_back(pose.apply(relative.apply(bodyB[i])));
-        for (Vec3& p : points)
-            p += Vec3(noise(random), noise(random), noise(random));
+        addNoise(points, random, noise);
         calibrator.update(t_s, points);
         if (f == 390)
             result.modelsWhileHidden = exportFrom(calibrator, config);
@@ -497,10 +513,8 @@ TEST(ObjectCalibrator, MarkersSeenOnlyBrieflyDoNotHoldTwoBodiesTogether) {
     std::vector<Vec3> points;
     for (int f = 0; f < 800; ++f) {
         const double t_s = f / 100.0;
-        const RigidTransform pose = poseAt(t_s, {-50.0, 0.0, 560.0}, {0.2, 1.0, 0.1}, 0.6, 0.0);
-        const double apart_s = std::max(0.0, t_s - 1.5);
-        RigidTransform relative;
-        relative.translation_mm = Vec3(12.0 * apart_s, -8.0 * apart_s, 0.0);
+        const RigidTransform pose = poseOfA(t_s);
+        const RigidTransform relative = slideAwayFromA(t_s);
         points.clear();
         for (const Vec3& m : bodyA)
             points.push_back(pose.apply(m));
@@ -509,8 +523,7 @@ TEST(ObjectCalibrator, MarkersSeenOnlyBrieflyDoNotHoldTwoBodiesTogether) {
         if (t_s >= 0.5 && t_s < 0.7)
             for (const Vec3& m : briefOfB)
                 points.push_back(pose.apply(relative.apply(m)));
-        for (Vec3& p : points)
-            p += Vec3(noise(random), noise(random), noise(random));
+        addNoise(points, random, noise);
         calibrator.update(t_s, points);
     }
     const std::vector<MarkerModel> models = exportFrom(calibrator, config);
