@@ -74,7 +74,8 @@ Status writeSimRecording(const SimRecordingOptions& options) {
     sim::Observation observation;
     std::vector<sim::SimBlob> frameBlobs;
     std::vector<Vec3> framePoints;
-    const sim::LevelNoise noise;
+    sim::LevelNoise noise;
+    noise.pointSigma_mm = world.scene().pointNoise_mm;
 
     for (std::int64_t f = 0; f < options.frames; ++f) {
         const auto frame = static_cast<std::uint64_t>(f);

@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "hal/sim/random.hpp"
+#include "hal/sim/random_objects.hpp"
 
 namespace edgetrack::sim {
 
@@ -260,7 +261,7 @@ StereoRig makeRig(const RigSpec& spec) {
 
 namespace {
 
-constexpr std::array<SceneInfo, 11> kScenes{{
+constexpr std::array<SceneInfo, 13> kScenes{{
     {"two_cubes", "7 cm and 5 cm cubes, slow and erratic, occluding each other (paper Table 1)"},
     {"cube_sphere", "7 cm cube and 7 cm sphere turned slowly side by side (paper Figure 7)"},
     {"toy_car", "toy car with 38 markers turned slowly to show every side"},
@@ -272,6 +273,9 @@ constexpr std::array<SceneInfo, 11> kScenes{{
     {"slow_cube", "7 cm cube alone, turned slowly: a calibration session"},
     {"wand", "three-marker wand waved through the volume"},
     {"three_cubes", "three 7 cm cubes turned side by side: calibration cost (paper section 7.1)"},
+    {"random_object", "one random object (ellipsoid, plate, ring, posts, star, box or car; 4-40 "
+                      "markers) drawn from the seed, with hand, glints and noise as drawn"},
+    {"random_objects", "two to four random objects at once, drawn from the seed"},
 }};
 
 MotionSpec slowTurns(const Vec3& centre) {
@@ -317,6 +321,13 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
     };
     const double midline = 0.5 * scene.rig.baseline_mm;
 
+    if (name == "random_object" || name == "random_objects") {
+        const int count = name == "random_object" ? 1 : 2 + static_cast<int>(seed % 3);
+        Scene random = makeRandomScene(count, seed);
+        random.name = scene.name;
+        random.description = scene.description;
+        return random;
+    }
     if (name == "two_cubes") {
         // Calm and erratic blocks alternate; the paths cross so the cubes hide each other.
         MotionSpec a = erratic({midline - 50.0, -10.0, 570.0});

@@ -33,6 +33,10 @@ struct MarkerObject {
     std::vector<BodyBox> bodyBoxes;
     /// A spherical body (radius > 0), centred on the object's origin.
     double bodyRadius_mm = 0.0;
+    /// A flat marker is seen while the cosine of the angle between its normal and the line to
+    /// the camera is at least this: 0.2 is a 157 degree cone; retroreflective foil on a curved
+    /// object may give only 60 degrees (0.87).
+    double minFacingCosine = 0.2;
 };
 
 /// The paper's 7x7x7 cm cube with 30 markers, five per face, irregular so no face repeats.
@@ -149,6 +153,8 @@ struct Scene {
     double noiseSigma_dn = 2.0;
     /// Background level, digital numbers.
     double background_dn = 10.0;
+    /// Noise of each coordinate of a point at points level (mm, standard deviation).
+    double pointNoise_mm = 0.05;
 };
 
 struct SceneInfo {

@@ -12,8 +12,6 @@ namespace edgetrack::sim {
 
 namespace {
 
-// Flat markers stop reflecting toward the camera well before grazing incidence.
-constexpr double kMinFacingCosine = 0.2;
 // Brightness of a marker squarely facing the ring at the rig's convergence distance (DN).
 constexpr double kPeakAtReference_dn = 1100.0;
 constexpr double kReferenceDistance_mm = 550.0;
@@ -99,7 +97,11 @@ bool World::markerVisible(const Vec3& position_rig_mm, const Vec3& normal_rig, i
     const Vec3 eye = rig_.camera(camera).centre_rig_mm();
     const Vec3 toEye = eye - position_rig_mm;
     const bool hasNormal = normal_rig.squaredNorm() > 0.5;
-    if (hasNormal && normal_rig.dot(toEye) < kMinFacingCosine * toEye.norm())
+    // Flat markers stop reflecting toward the camera well before grazing incidence.
+    const double minFacingCosine =
+        ownObject >= 0 ? scene_.objects[static_cast<std::size_t>(ownObject)].object.minFacingCosine
+                       : 0.2;
+    if (hasNormal && normal_rig.dot(toEye) < minFacingCosine * toEye.norm())
         return false;
 
     for (std::size_t o = 0; o < scene_.objects.size(); ++o) {

@@ -78,7 +78,9 @@ public:
         : world_(world)
         , images_(images)
         , pipeline_(world, seed, StereoConfig{})
-        , random_(seed ^ 0x5eedU) {}
+        , random_(seed ^ 0x5eedU) {
+        noise_.pointSigma_mm = world.scene().pointNoise_mm;
+    }
 
     /// \brief Observe frame \a frame into \a observation and its points (rig frame, mm).
     void next(std::uint64_t frame, sim::Observation& observation, std::vector<Vec3>& points) {
