@@ -21,6 +21,7 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , markers_(config.maxMarkers)
     , byTrackerId_(config.maxMarkers)
     , knownOfTracked_(config.tracking.maxMarkers)
+    , sortedPoints_(config.tracking.maxMarkers)
     , fitFrom_(stride_)
     , fitTo_(stride_)
     , votes_(stride_)
@@ -72,7 +73,15 @@ void ObjectCalibrator::update(double time_s, std::span<const Vec3> points_rig_mm
         return;
     ++counters_.frames;
     structureChanged_ = false;
-    const std::span<const TrackedMarker> tracked = tracker_.update(time_s, points_rig_mm);
+    // One order of the points whatever order they came in, so that nothing learnt depends on it.
+    sortedPoints_.clear();
+    for (const Vec3& p : points_rig_mm)
+        if (!sortedPoints_.push_back(p)) {
+            counters_.pointOverflow += points_rig_mm.size() - sortedPoints_.size();
+            break;
+        }
+    sortPointsCanonically(sortedPoints_.span());
+    const std::span<const TrackedMarker> tracked = tracker_.update(time_s, sortedPoints_.span());
     bindTrackedMarkers(tracked); // step 1
     removeInvalidMarkers();      // step 3 (before the edges see them)
     for (Object& o : objects_)   // step 2, and the poses of step 5

@@ -14,6 +14,7 @@
 #include "core/marker_tracker.hpp"
 #include "core/pyramid_clustering.hpp"
 #include "core/rigid_transform.hpp"
+#include "core/session_buffer.hpp"
 
 namespace edgetrack {
 
@@ -73,6 +74,8 @@ struct CalibrationCounters {
     std::uint64_t ghostsRemoved = 0;
     /// Objects whose frame was started afresh because no pose agreed with three markers.
     std::uint64_t rebased = 0;
+    /// Points of a frame beyond the frame-to-frame tracker's capacity, left out.
+    std::uint64_t pointOverflow = 0;
     /// Refused for lack of room: markers, objects, markers in an object.
     std::uint64_t markerOverflow = 0;
     std::uint64_t objectOverflow = 0;
@@ -368,6 +371,8 @@ private:
     BoundedVector<std::pair<std::uint32_t, std::size_t>> byTrackerId_;
     /// Per tracked marker of this frame: the known marker it is, or kNone.
     BoundedVector<std::size_t> knownOfTracked_;
+    /// This frame's points in canonical order (sortPointsCanonically).
+    BoundedVector<Vec3> sortedPoints_;
     /// Scratch of the size of one object: point pairs to fit, and each pair's vote.
     BoundedVector<Vec3> fitFrom_;
     BoundedVector<Vec3> fitTo_;
