@@ -4,10 +4,12 @@
 #include <cstdio>
 #include <filesystem>
 #include <optional>
+#include <random>
 #include <vector>
 
 #include <gtest/gtest.h>
 
+#include "core/calibration_completion.hpp"
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
@@ -105,6 +107,66 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
         RecordProperty("box_rms_mm", std::to_string(a.rms_mm));
     }
     EXPECT_EQ(boxModels, 1);
+}
+
+// The whole calibration as `edgetrack calibrate` runs it (online stage, then completion), with
+// each frame's points in the file's order and in three shuffled orders: one model holds the box,
+// all eight of its markers and no skin marker, and every order gives the same models.
+TEST(CalibrationRealData, ViconBoxCompletedTheSameWhateverTheOrderOfPoints) {
+    if (!std::filesystem::exists(kVicon))
+        GTEST_SKIP() << kVicon << " is absent (the shared real-data folder is not here)";
+    const Result<recording::C3dPoints> c3d = recording::readC3d(kVicon);
+    ASSERT_TRUE(c3d) << c3d.error().message;
+    const std::vector<Vec3> layout = labelledBox(*c3d, boxPoints(*c3d));
+
+    auto learn = [&](unsigned shuffleSeed) {
+        CalibrationConfig config;
+        ObjectCalibrator calibrator(config);
+        SessionBuffer session(c3d->frameCount, c3d->frameCount * 64);
+        std::mt19937 shuffler(shuffleSeed);
+        std::vector<Vec3> points;
+        for (std::size_t f = 0; f < c3d->frameCount; ++f) {
+            framePoints(*c3d, f, points);
+            if (shuffleSeed != 0)
+                std::shuffle(points.begin(), points.end(), shuffler);
+            const double t = static_cast<double>(f) / c3d->frameRate_hz;
+            calibrator.update(t, points);
+            session.append(t, points);
+        }
+        std::vector<MarkerModel> seeds;
+        for (std::size_t i = 0; i < config.maxObjects; ++i)
+            seeds.emplace_back(config.maxMarkersPerObject);
+        seeds.resize(calibrator.exportModels(seeds));
+        const CompletionConfig completionConfig;
+        CalibrationCompletion completion(completionConfig);
+        std::vector<MarkerModel> models;
+        for (std::size_t i = 0; i < completionConfig.maxModels; ++i)
+            models.emplace_back(completionConfig.maxMarkersPerModel);
+        models.resize(completion.run(session, seeds, models));
+        return models;
+    };
+    const std::vector<MarkerModel> models = learn(0);
+    int boxModels = 0;
+    for (const MarkerModel& model : models) {
+        const test::ModelAlignment a = test::alignModel(model, layout, 1.0);
+        if (a.matched < 3)
+            continue;
+        ++boxModels;
+        EXPECT_EQ(a.matched, 8u);
+        EXPECT_EQ(model.markers_model_mm.size(), 8u) << "skin markers in the box's model";
+        EXPECT_LT(a.rms_mm, 1.0);
+        RecordProperty("completed_box_rms_mm", std::to_string(a.rms_mm));
+    }
+    EXPECT_EQ(boxModels, 1);
+    for (unsigned order = 1; order <= 3; ++order) {
+        const std::vector<MarkerModel> shuffled = learn(order);
+        ASSERT_EQ(shuffled.size(), models.size()) << "order " << order;
+        for (std::size_t m = 0; m < models.size(); ++m) {
+            ASSERT_EQ(shuffled[m].markers_model_mm.size(), models[m].markers_model_mm.size());
+            for (std::size_t k = 0; k < models[m].markers_model_mm.size(); ++k)
+                EXPECT_EQ(shuffled[m].markers_model_mm[k], models[m].markers_model_mm[k]);
+        }
+    }
 }
 
 // Learn on one half, track the box through the other half with every model learnt. The issue asks

@@ -1,0 +1,791 @@
+// Completion of a calibration session: the provisional models tracked through all its frames.
+#include "core/calibration_completion.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <optional>
+
+#include "core/marker_set.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+namespace {
+
+constexpr std::size_t kCellBits = 16;
+constexpr std::size_t kCells = std::size_t{1} << kCellBits;
+/// Relative poses tried as the consensus of two objects' motion.
+constexpr std::size_t kConsensusCandidates = 32;
+constexpr double kDegree = 3.14159265358979323846 / 180.0;
+/// Directions a place was seen from that are kept (thinned to half the same-view angle).
+constexpr std::size_t kMaxViewDirections = 256;
+/// Points within this many site radii of a marker's place are that marker when refining.
+constexpr double kRefineRadiusFactor = 1.5;
+/// A body's pose is carried on across at most this many frames without either piece.
+constexpr std::size_t kHandoverGap_frames = 10;
+/// Frames over which a piece's speed and turn rate are measured before it leaves.
+constexpr std::size_t kSpeedBaseline_frames = 3;
+/// Handovers that must agree before two pieces that are never seen together are joined.
+constexpr std::size_t kMinHandovers = 3;
+
+struct Extent {
+    Vec3 centre = Vec3::Zero();
+    double radius_mm = 0.0;
+};
+
+Extent extentOf(std::span<const Vec3> markers_mm) {
+    Extent e;
+    if (markers_mm.empty())
+        return e;
+    for (const Vec3& m : markers_mm)
+        e.centre += m;
+    e.centre /= static_cast<double>(markers_mm.size());
+    for (const Vec3& m : markers_mm)
+        e.radius_mm = std::max(e.radius_mm, (m - e.centre).norm());
+    return e;
+}
+
+/// How far apart two transforms put the points of a ball (centre, radius): an upper bound (mm).
+double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball) {
+    return (a.apply(ball.centre) - b.apply(ball.centre)).norm() +
+           ball.radius_mm * rotationAngleBetween_rad(a.rotation, b.rotation);
+}
+
+/// The mean of transforms that agree closely: mean rotation (sign-aligned quaternions) about the
+/// ball's centre, and the mean place of that centre.
+RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball) {
+    Eigen::Vector4d q = Eigen::Vector4d::Zero();
+    Vec3 centre = Vec3::Zero();
+    const Quat& reference = transforms.front().rotation;
+    for (const RigidTransform& t : transforms) {
+        Eigen::Vector4d c = t.rotation.coeffs();
+        if (c.dot(reference.coeffs()) < 0.0)
+            c = -c;
+        q += c;
+        centre += t.apply(ball.centre);
+    }
+    RigidTransform mean;
+    mean.rotation = Quat(q.normalized());
+    centre /= static_cast<double>(transforms.size());
+    mean.translation_mm = centre - mean.rotation * ball.centre;
+    return mean;
+}
+
+bool lexicographicLess(const Vec3& a, const Vec3& b) {
+    if (a.x() != b.x())
+        return a.x() < b.x();
+    if (a.y() != b.y())
+        return a.y() < b.y();
+    return a.z() < b.z();
+}
+
+/// The transform that puts the most markers of \a part onto markers of \a whole (within
+/// \a tolerance_mm), from congruent triangles; and how many it puts there.
+struct Registration {
+    RigidTransform wholeFromPart;
+    std::size_t matched = 0;
+};
+Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
+                            double tolerance_mm) {
+    Registration best;
+    const std::size_t n = part.size();
+    if (n < 3 || whole.size() < 3)
+        return best;
+    const double tol2 = tolerance_mm * tolerance_mm;
+    auto countOn = [&](const RigidTransform& t) {
+        std::size_t count = 0;
+        for (const Vec3& p : part) {
+            const Vec3 moved = t.apply(p);
+            for (const Vec3& w : whole)
+                if ((moved - w).squaredNorm() <= tol2) {
+                    ++count;
+                    break;
+                }
+        }
+        return count;
+    };
+    // A few well-spread triangles of the part: each must land on a triangle of the whole.
+    std::size_t tried = 0;
+    for (std::size_t i = 0; i < n && tried < 12; ++i)
+        for (std::size_t j = i + 1; j < n && tried < 12; ++j)
+            for (std::size_t k = j + 1; k < n && tried < 12; ++k) {
+                const Vec3 &a = part[i], &b = part[j], &c = part[k];
+                const double twiceArea = (b - a).cross(c - a).norm();
+                const double longest = std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
+                if (longest <= 0.0 || twiceArea / longest < 8.0)
+                    continue;
+                ++tried;
+                const double dab = (a - b).norm(), dac = (a - c).norm(), dbc = (b - c).norm();
+                for (std::size_t x = 0; x < whole.size(); ++x)
+                    for (std::size_t y = 0; y < whole.size(); ++y) {
+                        if (y == x || std::abs((whole[x] - whole[y]).norm() - dab) > tolerance_mm)
+                            continue;
+                        for (std::size_t z = 0; z < whole.size(); ++z) {
+                            if (z == x || z == y ||
+                                std::abs((whole[x] - whole[z]).norm() - dac) > tolerance_mm ||
+                                std::abs((whole[y] - whole[z]).norm() - dbc) > tolerance_mm)
+                                continue;
+                            const Vec3 from[3] = {a, b, c};
+                            const Vec3 to[3] = {whole[x], whole[y], whole[z]};
+                            const std::optional<RigidFit> fit = fitRigid(from, to);
+                            if (!fit)
+                                continue;
+                            const std::size_t count = countOn(fit->transform);
+                            if (count > best.matched) {
+                                best.matched = count;
+                                best.wholeFromPart = fit->transform;
+                            }
+                        }
+                    }
+            }
+    return best;
+}
+
+} // namespace
+
+CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
+    : config_(config) {
+    valid_ = config.maxModels > 0 && config.maxMarkersPerModel >= 4 &&
+             config.maxMarkersPerModel <= MarkerSet::kCapacity && config.siteRadius_mm > 0.0 &&
+             config.maxSites > 0 && config.minModelMarkers >= 4 && config.maxRounds > 0 &&
+             config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0;
+    if (!valid_)
+        return;
+    sites_.reserve(config.maxSites);
+    cellHead_.assign(kCells, -1);
+}
+
+std::size_t CalibrationCompletion::run(const SessionBuffer& session,
+                                       std::span<const MarkerModel> seeds,
+                                       std::span<MarkerModel> out) {
+    counters_ = {};
+    bodies_.clear();
+    const std::size_t frames = session.frames();
+    if (!valid_ || frames < 2)
+        return 0;
+    const double span_s = session.time_s(frames - 1) - session.time_s(0);
+    frameRate_hz_ = span_s > 0.0 ? static_cast<double>(frames - 1) / span_s : 100.0;
+
+    // Largest seeds first: the tracker serves the bodies in order, and a body's markers are best
+    // claimed by its largest model.
+    std::vector<std::size_t> order(seeds.size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+        return seeds[a].markers_model_mm.size() > seeds[b].markers_model_mm.size();
+    });
+    for (const std::size_t s : order) {
+        const MarkerModel& seed = seeds[s];
+        if (seed.markers_model_mm.size() < 4)
+            continue;
+        if (bodies_.size() == config_.maxModels) {
+            ++counters_.modelOverflow;
+            continue;
+        }
+        Body& body = bodies_.emplace_back();
+        for (const Vec3& m : seed.markers_model_mm) {
+            if (body.markers_mm.size() == config_.maxMarkersPerModel) {
+                ++counters_.markerOverflow;
+                break;
+            }
+            body.markers_mm.push_back(m);
+        }
+        for (const ModelEdge& e : seed.edges)
+            if (e.from < body.markers_mm.size() && e.to < body.markers_mm.size())
+                body.edges.emplace_back(e.from, e.to);
+        body.T_rig_from_body.resize(frames);
+        body.posed.assign(frames, 0);
+        ++counters_.seeds;
+    }
+
+    bool changed = true;
+    for (int round = 0; round < config_.maxRounds && changed; ++round) {
+        ++counters_.rounds;
+        trackAll(session);
+        changed = joinBodies(session);
+        for (Body& body : bodies_) {
+            if (!body.alive)
+                continue;
+            if (measure(session, body))
+                changed = true;
+            if (body.markers_mm.size() < config_.minModelMarkers) {
+                body.alive = false;
+                ++counters_.dropped;
+                changed = true;
+            }
+        }
+    }
+    // The poses must come from the models as they now are.
+    if (changed)
+        trackAll(session);
+    for (Body& body : bodies_)
+        if (body.alive)
+            refine(session, body);
+
+    std::vector<const Body*> done;
+    for (const Body& body : bodies_)
+        if (body.alive && body.markers_mm.size() >= config_.minModelMarkers)
+            done.push_back(&body);
+    std::stable_sort(done.begin(), done.end(), [](const Body* a, const Body* b) {
+        return a->markers_mm.size() > b->markers_mm.size();
+    });
+    std::size_t count = 0;
+    for (const Body* body : done) {
+        if (count == out.size()) {
+            ++counters_.modelOverflow;
+            continue;
+        }
+        MarkerModel& model = out[count];
+        model.clear();
+        model.id = static_cast<std::uint32_t>(count);
+        const RigidTransform canonicalFromBody = canonicalFrame(body->markers_mm).inverse();
+        for (const Vec3& m : body->markers_mm)
+            if (!model.markers_model_mm.push_back(canonicalFromBody.apply(m)))
+                ++counters_.markerOverflow;
+        for (const auto& [a, b] : body->edges)
+            if (a < model.markers_model_mm.size() && b < model.markers_model_mm.size())
+                model.edges.push_back(
+                    {a, b, (model.markers_model_mm[a] - model.markers_model_mm[b]).norm()});
+        ++count;
+    }
+    computeSmin(out.first(count), config_.smin);
+    return count;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tracking every body through the session
+
+void CalibrationCompletion::trackAll(const SessionBuffer& session) {
+    const std::size_t frames = session.frames();
+    std::stable_sort(bodies_.begin(), bodies_.end(), [](const Body& a, const Body& b) {
+        if (a.alive != b.alive)
+            return a.alive;
+        return a.markers_mm.size() > b.markers_mm.size();
+    });
+    std::size_t alive = 0;
+    while (alive < bodies_.size() && bodies_[alive].alive)
+        ++alive;
+    std::vector<MarkerModel> models;
+    models.reserve(alive);
+    for (std::size_t b = 0; b < alive; ++b) {
+        const Body& body = bodies_[b];
+        MarkerModel& model = models.emplace_back(config_.maxMarkersPerModel);
+        model.id = static_cast<std::uint32_t>(b);
+        for (const Vec3& m : body.markers_mm)
+            model.markers_model_mm.push_back(m);
+        if (body.edges.empty()) {
+            // Nothing known of co-visibility yet: every pair may be seen together.
+            for (std::size_t i = 0; i < body.markers_mm.size(); ++i)
+                for (std::size_t j = i + 1; j < body.markers_mm.size(); ++j)
+                    model.edges.push_back({static_cast<std::uint16_t>(i),
+                                           static_cast<std::uint16_t>(j),
+                                           (body.markers_mm[i] - body.markers_mm[j]).norm()});
+        } else {
+            for (const auto& [i, j] : body.edges)
+                model.edges.push_back({i, j, (body.markers_mm[i] - body.markers_mm[j]).norm()});
+        }
+        std::fill(bodies_[b].posed.begin(), bodies_[b].posed.end(), std::uint8_t{0});
+    }
+    if (alive == 0)
+        return;
+    // S_min as this tracker tells distances apart: a self-similar layout (a sphere) needs fewer
+    // markers to be told from itself at the tracker's tolerance than at the export's safe one.
+    SminConfig smin = config_.smin;
+    smin.tolerance_mm = std::min(smin.tolerance_mm, config_.tracking.distanceTolerance_mm);
+    computeSmin(models, smin);
+    // A layout that is nearly the same seen from several sides (a sphere) may need more markers
+    // to be told from itself than are ever in view at once. The session does not need that
+    // certainty: of all hypotheses the tracker takes the best (most markers, then least residual),
+    // and a rare wrong pose scatters its points, which no marker's place collects.
+    for (MarkerModel& m : models)
+        m.sMin =
+            std::min<std::uint32_t>(m.sMin, static_cast<std::uint32_t>(config_.maxAcquireMarkers));
+
+    // Forwards, then backwards in time; each frame takes whichever pass matched more markers over
+    // all bodies, as a whole, so that no point serves two bodies in one frame.
+    std::vector<std::uint32_t> forwardMarkers(frames, 0);
+    {
+        ModelTracker tracker(models, config_.tracking);
+        if (!tracker.isValid())
+            return;
+        for (std::size_t f = 0; f < frames; ++f) {
+            tracker.update(session.time_s(f), session.points(f));
+            for (std::size_t b = 0; b < alive; ++b) {
+                const TrackedBody& tracked = tracker.bodies()[b];
+                if (!tracked.found())
+                    continue;
+                bodies_[b].posed[f] = 1;
+                bodies_[b].T_rig_from_body[f] = tracked.T_rig_from_model;
+                forwardMarkers[f] += tracked.markers;
+            }
+        }
+    }
+    ModelTracker tracker(models, config_.tracking);
+    for (std::size_t step = 0; step < frames; ++step) {
+        const std::size_t f = frames - 1 - step;
+        tracker.update(-session.time_s(f), session.points(f));
+        std::uint32_t total = 0;
+        for (const TrackedBody& tracked : tracker.bodies())
+            if (tracked.found())
+                total += tracked.markers;
+        if (total <= forwardMarkers[f])
+            continue;
+        for (std::size_t b = 0; b < alive; ++b) {
+            const TrackedBody& tracked = tracker.bodies()[b];
+            bodies_[b].posed[f] = tracked.found() ? 1 : 0;
+            if (tracked.found())
+                bodies_[b].T_rig_from_body[f] = tracked.T_rig_from_model;
+        }
+    }
+    counters_.framesTracked += 2 * frames;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Joining the pieces of one body
+
+bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
+    bool joined = false;
+    const std::size_t frames = session.frames();
+    std::vector<RigidTransform> relative;
+    std::vector<RigidTransform> agreeing;
+    for (std::size_t a = 0; a < bodies_.size(); ++a) {
+        for (std::size_t b = a + 1; b < bodies_.size(); ++b) {
+            Body& into = bodies_[a];
+            Body& from = bodies_[b];
+            if (!into.alive || !from.alive)
+                continue;
+            const Extent ball = extentOf(from.markers_mm);
+            // b's frame to a's in every frame both were found.
+            relative.clear();
+            for (std::size_t f = 0; f < frames; ++f)
+                if (into.posed[f] && from.posed[f])
+                    relative.push_back(into.T_rig_from_body[f].inverse() * from.T_rig_from_body[f]);
+            std::optional<RigidTransform> intoFromFrom;
+            if (relative.size() >= config_.minSharedFrames) {
+                // The relative pose most frames agree with; one body keeps one relative pose.
+                std::size_t bestAgree = 0;
+                std::size_t bestCandidate = 0;
+                const std::size_t step =
+                    std::max<std::size_t>(1, relative.size() / kConsensusCandidates);
+                for (std::size_t c = 0; c < relative.size(); c += step) {
+                    std::size_t agree = 0;
+                    for (const RigidTransform& r : relative)
+                        if (disagreement_mm(r, relative[c], ball) <= config_.sameBodyTolerance_mm)
+                            ++agree;
+                    if (agree > bestAgree) {
+                        bestAgree = agree;
+                        bestCandidate = c;
+                    }
+                }
+                if (static_cast<double>(bestAgree) >=
+                    config_.sameBodyShare * static_cast<double>(relative.size())) {
+                    agreeing.clear();
+                    for (const RigidTransform& r : relative)
+                        if (disagreement_mm(r, relative[bestCandidate], ball) <=
+                            config_.sameBodyTolerance_mm)
+                            agreeing.push_back(r);
+                    intoFromFrom = meanTransform(agreeing, ball);
+                    ++counters_.joinedByMotion;
+                }
+            } else {
+                // Seldom found at once: one may be a piece of the other that the tracker gave the
+                // other's points to. Its layout then lies in the other's.
+                const Registration r =
+                    registerLayout(from.markers_mm, into.markers_mm, config_.sameBodyTolerance_mm);
+                if (r.matched >= 4 && 2 * r.matched >= from.markers_mm.size()) {
+                    intoFromFrom = r.wholeFromPart;
+                    ++counters_.joinedByLayout;
+                }
+            }
+            if (!intoFromFrom) {
+                // Never in view together: one piece of a turning body may come into view just as
+                // the other leaves. The pose of the one, carried on at its speed, then lands on
+                // the other's pose by one relative pose, every time it happens.
+                intoFromFrom = relativePoseAcrossHandovers(session, into, from);
+                if (intoFromFrom)
+                    ++counters_.joinedByHandover;
+            }
+            if (!intoFromFrom)
+                continue;
+            const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+            for (const Vec3& m : from.markers_mm) {
+                const Vec3 moved = intoFromFrom->apply(m);
+                const bool known =
+                    std::any_of(into.markers_mm.begin(), into.markers_mm.end(), [&](const Vec3& n) {
+                        return (n - moved).squaredNorm() < spacing2;
+                    });
+                if (known)
+                    continue;
+                if (into.markers_mm.size() == config_.maxMarkersPerModel) {
+                    ++counters_.markerOverflow;
+                    break;
+                }
+                into.markers_mm.push_back(moved);
+            }
+            // Its co-visibility is measured again from the poses.
+            into.edges.clear();
+            const RigidTransform fromFromInto = intoFromFrom->inverse();
+            for (std::size_t f = 0; f < frames; ++f)
+                if (!into.posed[f] && from.posed[f]) {
+                    into.posed[f] = 1;
+                    into.T_rig_from_body[f] = from.T_rig_from_body[f] * fromFromInto;
+                }
+            from.alive = false;
+            joined = true;
+        }
+    }
+    return joined;
+}
+
+namespace {
+
+/// \a body's pose at \a t_s carried on from its poses at \a t0_s and \a t1_s (t0 < t1): its
+/// centre \a centre_body (body frame) moves on at its speed, and it turns on at its turn rate.
+RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
+                           double t1_s, double t_s, const Vec3& centre_body) {
+    const double s = (t_s - t1_s) / (t1_s - t0_s);
+    const Vec3 c0 = at0.apply(centre_body), c1 = at1.apply(centre_body);
+    const Eigen::AngleAxisd turn(at1.rotation * at0.rotation.inverse());
+    RigidTransform out;
+    out.rotation = Quat(Eigen::AngleAxisd(turn.angle() * s, turn.axis())) * at1.rotation;
+    out.rotation.normalize();
+    out.translation_mm = c1 + s * (c1 - c0) - out.rotation * centre_body;
+    return out;
+}
+
+} // namespace
+
+std::optional<RigidTransform>
+CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session, const Body& a,
+                                                   const Body& b) const {
+    const std::size_t frames = session.frames();
+    const Extent ballA = extentOf(a.markers_mm);
+    const Extent ballB = extentOf(b.markers_mm);
+    std::vector<RigidTransform> estimates; // b's frame to a's
+    // The first pose of one body's stretch, and the other's last poses just before it.
+    auto handover = [&](const Body& first, const Body& second, const Extent& firstBall,
+                        bool firstIsA) {
+        for (std::size_t f = 1; f < frames; ++f) {
+            if (!second.posed[f] || second.posed[f - 1] || first.posed[f])
+                continue;
+            std::size_t end = f; // the earlier body's last posed frame before f
+            for (std::size_t back = 1; back <= kHandoverGap_frames && back <= f; ++back)
+                if (first.posed[f - back]) {
+                    end = f - back;
+                    break;
+                }
+            if (end == f || end < kSpeedBaseline_frames)
+                continue;
+            const std::size_t start = end - kSpeedBaseline_frames;
+            bool steady = true;
+            for (std::size_t g = start; g <= end; ++g)
+                steady = steady && first.posed[g] != 0;
+            if (!steady)
+                continue;
+            const RigidTransform carried = extrapolate(
+                first.T_rig_from_body[start], session.time_s(start), first.T_rig_from_body[end],
+                session.time_s(end), session.time_s(f), firstBall.centre);
+            const RigidTransform firstFromSecond = carried.inverse() * second.T_rig_from_body[f];
+            estimates.push_back(firstIsA ? firstFromSecond : firstFromSecond.inverse());
+        }
+    };
+    handover(a, b, ballA, true);
+    handover(b, a, ballB, false);
+    if (estimates.size() < kMinHandovers)
+        return std::nullopt;
+    std::size_t bestAgree = 0, best = 0;
+    for (std::size_t c = 0; c < estimates.size(); ++c) {
+        std::size_t agree = 0;
+        for (const RigidTransform& e : estimates)
+            if (disagreement_mm(e, estimates[c], ballB) <= config_.handoverTolerance_mm)
+                ++agree;
+        if (agree > bestAgree) {
+            bestAgree = agree;
+            best = c;
+        }
+    }
+    if (bestAgree < kMinHandovers ||
+        static_cast<double>(bestAgree) <
+            config_.sameBodyShare * static_cast<double>(estimates.size()))
+        return std::nullopt;
+    std::vector<RigidTransform> agreeing;
+    for (const RigidTransform& e : estimates)
+        if (disagreement_mm(e, estimates[best], ballB) <= config_.handoverTolerance_mm)
+            agreeing.push_back(e);
+    return meanTransform(agreeing, ballB);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Measuring a body's markers from every frame it was found in
+
+std::size_t CalibrationCompletion::cellOf(const Vec3& q_mm) const {
+    const double cell = 2.0 * config_.siteRadius_mm;
+    const auto ix = static_cast<std::int64_t>(std::floor(q_mm.x() / cell));
+    const auto iy = static_cast<std::int64_t>(std::floor(q_mm.y() / cell));
+    const auto iz = static_cast<std::int64_t>(std::floor(q_mm.z() / cell));
+    const auto h = static_cast<std::uint64_t>(ix * 73856093 ^ iy * 19349663 ^ iz * 83492791);
+    return static_cast<std::size_t>(h & (kCells - 1));
+}
+
+std::int32_t CalibrationCompletion::siteNear(const Vec3& q_mm) const {
+    const double cell = 2.0 * config_.siteRadius_mm;
+    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    std::int32_t best = -1;
+    double bestDistance2 = radius2;
+    for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dz = -1; dz <= 1; ++dz) {
+                const Vec3 probe = q_mm + cell * Vec3(dx, dy, dz);
+                for (std::int32_t s = cellHead_[cellOf(probe)]; s >= 0;
+                     s = sites_[static_cast<std::size_t>(s)].next) {
+                    const Site& site = sites_[static_cast<std::size_t>(s)];
+                    const double d2 =
+                        (site.sum_mm / static_cast<double>(site.hits) - q_mm).squaredNorm();
+                    if (d2 <= bestDistance2) {
+                        bestDistance2 = d2;
+                        best = s;
+                    }
+                }
+            }
+    return best;
+}
+
+std::int32_t CalibrationCompletion::addSite(const Vec3& q_mm) {
+    if (sites_.size() == config_.maxSites) {
+        ++counters_.siteOverflow;
+        return -1;
+    }
+    const std::size_t cell = cellOf(q_mm);
+    Site& site = sites_.emplace_back();
+    site.sum_mm = q_mm;
+    site.hits = 1;
+    site.next = cellHead_[cell];
+    cellHead_[cell] = static_cast<std::int32_t>(sites_.size() - 1);
+    return cellHead_[cell];
+}
+
+bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
+    const std::size_t frames = session.frames();
+    sites_.clear();
+    std::fill(cellHead_.begin(), cellHead_.end(), -1);
+
+    const Extent extent = extentOf(body.markers_mm);
+    const double reach = extent.radius_mm + config_.reach_mm;
+    const double reach2 = reach * reach;
+    for (std::size_t f = 0; f < frames; ++f) {
+        if (!body.posed[f])
+            continue;
+        const RigidTransform bodyFromRig = body.T_rig_from_body[f].inverse();
+        for (const Vec3& p : session.points(f)) {
+            const Vec3 q = bodyFromRig.apply(p);
+            if ((q - extent.centre).squaredNorm() > reach2)
+                continue;
+            std::int32_t s = siteNear(q);
+            if (s < 0) {
+                s = addSite(q);
+                if (s < 0)
+                    continue;
+                Site& fresh = sites_[static_cast<std::size_t>(s)];
+                fresh.lastFrame = static_cast<std::uint32_t>(f);
+                continue;
+            }
+            Site& site = sites_[static_cast<std::size_t>(s)];
+            if (site.lastFrame == f)
+                continue;
+            site.lastFrame = static_cast<std::uint32_t>(f);
+            ++site.hits;
+            site.sum_mm += q;
+        }
+    }
+
+    // Places seen long enough, strongest first; of two closer than a marker's size, the stronger.
+    const auto minHits = static_cast<std::uint32_t>(std::ceil(config_.minSeen_s * frameRate_hz_));
+    std::vector<std::size_t> candidates;
+    for (std::size_t s = 0; s < sites_.size(); ++s)
+        if (sites_[s].hits >= std::max<std::uint32_t>(minHits, 2))
+            candidates.push_back(s);
+    std::sort(candidates.begin(), candidates.end(), [&](std::size_t a, std::size_t b) {
+        if (sites_[a].hits != sites_[b].hits)
+            return sites_[a].hits > sites_[b].hits;
+        return lexicographicLess(sites_[a].sum_mm, sites_[b].sum_mm);
+    });
+    std::vector<Vec3> place;
+    const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+    for (const std::size_t s : candidates) {
+        const Vec3 mean = sites_[s].sum_mm / static_cast<double>(sites_[s].hits);
+        const bool near = std::any_of(place.begin(), place.end(), [&](const Vec3& p) {
+            return (p - mean).squaredNorm() < spacing2;
+        });
+        if (near)
+            continue;
+        if (place.size() == 2 * config_.maxMarkersPerModel) {
+            ++counters_.markerOverflow;
+            break;
+        }
+        place.push_back(mean);
+    }
+
+    // Seen again whenever the cameras look at it as they once saw it? First the directions each
+    // place was seen from (body frame, thinned), then, in every frame, whether the cameras look
+    // from one of them and it is there.
+    const std::size_t n = place.size();
+    std::vector<std::uint32_t> expected(n, 0), seenWhenExpected(n, 0), seen(n, 0);
+    std::vector<std::uint32_t> together(n * n, 0);
+    std::vector<std::vector<Vec3>> seenFrom(n);
+    std::vector<std::uint8_t> hit(n);
+    std::vector<std::size_t> hitNow;
+    const double sameView = std::cos(config_.sameViewAngle_deg * kDegree);
+    const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
+    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!body.posed[f])
+                continue;
+            const RigidTransform& rigFromBody = body.T_rig_from_body[f];
+            const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+            const std::span<const Vec3> points = session.points(f);
+            hitNow.clear();
+            for (std::size_t k = 0; k < n; ++k) {
+                const Vec3 there = rigFromBody.apply(place[k]);
+                const bool isHit = std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
+                    return (p - there).squaredNorm() <= radius2;
+                });
+                const Vec3 view = (viewpoint - place[k]).normalized();
+                std::vector<Vec3>& directions = seenFrom[k];
+                if (pass == 0) {
+                    if (!isHit)
+                        continue;
+                    ++seen[k];
+                    hitNow.push_back(k);
+                    const bool known =
+                        std::any_of(directions.begin(), directions.end(),
+                                    [&](const Vec3& d) { return d.dot(view) >= thinning; });
+                    if (!known && directions.size() < kMaxViewDirections)
+                        directions.push_back(view);
+                    continue;
+                }
+                const bool seenFromHere =
+                    std::any_of(directions.begin(), directions.end(),
+                                [&](const Vec3& d) { return d.dot(view) >= sameView; });
+                if (seenFromHere) {
+                    ++expected[k];
+                    seenWhenExpected[k] += isHit ? 1U : 0U;
+                }
+            }
+            for (std::size_t i = 0; i < hitNow.size(); ++i)
+                for (std::size_t j = i + 1; j < hitNow.size(); ++j)
+                    ++together[hitNow[i] * n + hitNow[j]];
+        }
+    }
+    std::vector<std::size_t> accepted;
+    for (std::size_t k = 0; k < n; ++k) {
+        if (seen[k] < minHits)
+            continue;
+        if (expected[k] > 0 && static_cast<double>(seenWhenExpected[k]) <
+                                   config_.minSeenShare * static_cast<double>(expected[k]))
+            continue;
+        if (accepted.size() == config_.maxMarkersPerModel) {
+            ++counters_.markerOverflow;
+            break;
+        }
+        accepted.push_back(k);
+    }
+
+    std::vector<Vec3> markers;
+    for (const std::size_t k : accepted)
+        markers.push_back(place[k]);
+    auto covered = [](std::span<const Vec3> set, const Vec3& p) {
+        return std::any_of(set.begin(), set.end(),
+                           [&](const Vec3& q) { return (q - p).squaredNorm() < 0.25; });
+    };
+    std::size_t added = 0, removed = 0;
+    for (const Vec3& m : markers)
+        added += covered(body.markers_mm, m) ? 0U : 1U;
+    for (const Vec3& m : body.markers_mm)
+        removed += covered(markers, m) ? 0U : 1U;
+    counters_.markersAdded += added;
+    counters_.markersRemoved += removed;
+    body.markers_mm = std::move(markers);
+    body.edges.clear();
+    for (std::size_t a = 0; a < accepted.size(); ++a)
+        for (std::size_t b = a + 1; b < accepted.size(); ++b) {
+            const std::size_t i = std::min(accepted[a], accepted[b]);
+            const std::size_t j = std::max(accepted[a], accepted[b]);
+            if (together[i * n + j] >= 2)
+                body.edges.emplace_back(static_cast<std::uint16_t>(a),
+                                        static_cast<std::uint16_t>(b));
+        }
+    return added > 0 || removed > 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Least squares over every pose
+
+void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
+    const std::size_t frames = session.frames();
+    const std::size_t n = body.markers_mm.size();
+    if (n < 3)
+        return;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    std::vector<Vec3> sums(n);
+    std::vector<std::uint32_t> counts(n);
+    std::vector<std::uint32_t> together(n * n, 0);
+    std::vector<Vec3> from, to;
+    std::vector<std::size_t> which;
+    for (int iteration = 0; iteration < config_.refineIterations; ++iteration) {
+        const bool last = iteration + 1 == config_.refineIterations;
+        std::fill(sums.begin(), sums.end(), Vec3::Zero());
+        std::fill(counts.begin(), counts.end(), 0U);
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!body.posed[f])
+                continue;
+            const std::span<const Vec3> points = session.points(f);
+            from.clear();
+            to.clear();
+            which.clear();
+            for (std::size_t k = 0; k < n; ++k) {
+                const Vec3 there = body.T_rig_from_body[f].apply(body.markers_mm[k]);
+                double best2 = radius * radius;
+                const Vec3* match = nullptr;
+                for (const Vec3& p : points) {
+                    const double d2 = (p - there).squaredNorm();
+                    if (d2 <= best2) {
+                        best2 = d2;
+                        match = &p;
+                    }
+                }
+                if (match) {
+                    from.push_back(body.markers_mm[k]);
+                    to.push_back(*match);
+                    which.push_back(k);
+                }
+            }
+            const std::optional<RigidFit> fit = fitRigid(from, to);
+            if (!fit || fit->rms_mm > config_.tracking.maxRms_mm) {
+                body.posed[f] = 0;
+                continue;
+            }
+            body.T_rig_from_body[f] = fit->transform;
+            const RigidTransform bodyFromRig = fit->transform.inverse();
+            for (std::size_t i = 0; i < which.size(); ++i) {
+                sums[which[i]] += bodyFromRig.apply(to[i]);
+                ++counts[which[i]];
+            }
+            if (last)
+                for (std::size_t i = 0; i < which.size(); ++i)
+                    for (std::size_t j = i + 1; j < which.size(); ++j)
+                        ++together[which[i] * n + which[j]];
+        }
+        for (std::size_t k = 0; k < n; ++k)
+            if (counts[k] > 0)
+                body.markers_mm[k] = sums[k] / static_cast<double>(counts[k]);
+    }
+    body.edges.clear();
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + 1; j < n; ++j)
+            if (together[i * n + j] >= 2)
+                body.edges.emplace_back(static_cast<std::uint16_t>(i),
+                                        static_cast<std::uint16_t>(j));
+}
+
+} // namespace edgetrack

@@ -1,0 +1,176 @@
+// Completion of a calibration session: the provisional models tracked through all its frames.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "core/marker_model.hpp"
+#include "core/model_tracker.hpp"
+#include "core/rigid_transform.hpp"
+#include "core/session_buffer.hpp"
+
+namespace edgetrack {
+
+/// \brief Settings of the completion stage; defaults suit hand-held objects at 100 Hz.
+struct CompletionConfig {
+    /// How the provisional models are followed through the session.
+    ModelTrackingConfig tracking = defaultTracking();
+    /// A body is found afresh from at most this many of its markers, whatever its S_min.
+    std::size_t maxAcquireMarkers = 6;
+    /// Models and markers per model it works with (more are refused and counted).
+    std::size_t maxModels = 16;
+    std::size_t maxMarkersPerModel = 96;
+    /// Points of one place in an object's frame: within this of its mean (mm). Real data needs
+    /// room: on the Vicon recording a 500 mm box placed by a fit of all its markers puts them
+    /// 1-2 mm about their place (1.5 mm left two of its eight out).
+    double siteRadius_mm = 2.5;
+    /// A place becomes a marker when a point sat there, the object posed, this long (s)...
+    double minSeen_s = 0.3;
+    /// ...and in at least this share of the frames in which the cameras looked at it within
+    /// sameViewAngle_deg of a direction it was seen from: a marker of another body that sat
+    /// still against this one for a while is missing when this one is seen that way again.
+    double minSeenShare = 0.3;
+    double sameViewAngle_deg = 8.0;
+    /// Points farther than this from an object's markers are not looked at for it (mm).
+    double reach_mm = 60.0;
+    /// Places looked at per object and round (more are refused and counted).
+    std::size_t maxSites = 65536;
+    /// Rounds of tracking, joining and re-measuring; it stops earlier once nothing changes.
+    int maxRounds = 8;
+    /// Two objects seen at once in this many frames with (nearly) one relative pose in at least
+    /// sameBodyShare of them move as one rigid body.
+    std::size_t minSharedFrames = 20;
+    double sameBodyShare = 0.8;
+    /// Relative poses agree when they place the objects' markers within this of each other (mm).
+    double sameBodyTolerance_mm = 2.0;
+    /// Relative poses found by carrying one piece's pose on at its speed until the other piece
+    /// comes into view agree within this (mm).
+    double handoverTolerance_mm = 4.0;
+    /// Two markers of one model closer than this are one (mm).
+    double minMarkerSpacing_mm = 4.0;
+    /// Alternations of pose and marker least squares at the end.
+    int refineIterations = 4;
+    /// A model has at least this many markers.
+    std::size_t minModelMarkers = 4;
+    /// Where the cameras are, rig frame (mm): markers are seen from here.
+    Vec3 viewpoint_rig_mm = Vec3::Zero();
+    SminConfig smin{};
+
+    static ModelTrackingConfig defaultTracking() {
+        ModelTrackingConfig c;
+        // Points of a session are noisier than the tracker's bench rig (0.3 mm at the far end).
+        c.distanceTolerance_mm = 1.5;
+        c.searchBudget = 50000;
+        // Three markers near their predicted places carry a pose on: a piece of an object is
+        // followed while it turns out of view, so the markers that come into view join it.
+        c.minTrackedMarkers = 3;
+        return c;
+    }
+
+    bool operator==(const CompletionConfig&) const = default;
+};
+
+/// \brief What completion did, for the summary and the status view.
+struct CompletionCounters {
+    std::uint64_t rounds = 0;
+    std::uint64_t framesTracked = 0;
+    std::uint64_t seeds = 0;
+    /// Objects joined because they moved as one body, or because one's layout lies in the other's
+    /// and they were never seen apart.
+    std::uint64_t joinedByMotion = 0;
+    std::uint64_t joinedByLayout = 0;
+    /// Objects never seen at once joined because one came into view as the other left, every
+    /// time by one relative pose.
+    std::uint64_t joinedByHandover = 0;
+    /// Objects dropped for having fewer than minModelMarkers markers in the end.
+    std::uint64_t dropped = 0;
+    /// Markers found beyond the seeds', and seed markers not confirmed.
+    std::uint64_t markersAdded = 0;
+    std::uint64_t markersRemoved = 0;
+    /// Refused for lack of room: places, models, markers of a model.
+    std::uint64_t siteOverflow = 0;
+    std::uint64_t modelOverflow = 0;
+    std::uint64_t markerOverflow = 0;
+};
+
+/**
+ * \brief Turns the online stage's provisional models into complete ones, using every frame of the
+ * session (the paper's section 7.1: the tracker applied where frame-to-frame correspondence was
+ * lost).
+ *
+ * In rounds: all models are tracked together through the session, forwards and backwards, by the
+ * model-based tracker; two models that move as one rigid body, or one of whose layouts lies in the
+ * other's while they are never seen apart, are joined; then every model is measured again from
+ * scratch: each frame's points are put into the model's frame by its pose, and the places where
+ * points sit across many frames, and are seen whenever the cameras look at them as before, become
+ * its markers. The rounds stop when the models stop changing. Marker positions are then refined by
+ * alternating least squares over every pose, co-visibility edges are counted, and S_min is set.
+ *
+ * It runs once, when a session ends, off the frame loop (the firmware gives it a thread of its
+ * own): run() allocates its working storage when it starts, unlike the per-frame stages.
+ */
+class CalibrationCompletion {
+public:
+    explicit CalibrationCompletion(const CompletionConfig& config);
+
+    /// \brief False when the configuration cannot work.
+    bool isValid() const { return valid_; }
+
+    /**
+     * \brief Complete \a seeds over \a session.
+     * \param session every frame of the session.
+     * \param seeds provisional models (the online stage's), any frame each.
+     * \param out models to fill, each able to hold maxMarkersPerModel markers.
+     * \return how many models were written, ids 0, 1, ... in order of size.
+     */
+    std::size_t run(const SessionBuffer& session, std::span<const MarkerModel> seeds,
+                    std::span<MarkerModel> out);
+
+    const CompletionCounters& counters() const { return counters_; }
+
+private:
+    /// An object as completion knows it: markers in its own frame (mm) and, per session frame,
+    /// its pose if it was found.
+    struct Body {
+        std::vector<Vec3> markers_mm;
+        /// Co-visible marker pairs (a < b).
+        std::vector<std::pair<std::uint16_t, std::uint16_t>> edges;
+        std::vector<RigidTransform> T_rig_from_body;
+        std::vector<std::uint8_t> posed;
+        bool alive = true;
+    };
+    struct Site {
+        Vec3 sum_mm = Vec3::Zero();
+        std::uint32_t hits = 0;
+        std::uint32_t lastFrame = UINT32_MAX;
+        std::int32_t next = -1;
+    };
+
+    void trackAll(const SessionBuffer& session);
+    /// \return whether any were joined.
+    bool joinBodies(const SessionBuffer& session);
+    /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
+    /// with, if there were enough.
+    std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,
+                                                              const Body& a, const Body& b) const;
+    bool measure(const SessionBuffer& session, Body& body);
+    void refine(const SessionBuffer& session, Body& body);
+    void countEdges(const SessionBuffer& session, Body& body);
+    /// Index of the site within siteRadius_mm of \a q_mm, or -1.
+    std::int32_t siteNear(const Vec3& q_mm) const;
+    std::int32_t addSite(const Vec3& q_mm);
+    std::size_t cellOf(const Vec3& q_mm) const;
+
+    CompletionConfig config_;
+    bool valid_ = false;
+    CompletionCounters counters_{};
+    std::vector<Body> bodies_;
+    double frameRate_hz_ = 100.0;
+    std::vector<Site> sites_;
+    std::vector<std::int32_t> cellHead_;
+};
+
+} // namespace edgetrack
