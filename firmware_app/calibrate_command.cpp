@@ -1,6 +1,7 @@
 // `edgetrack calibrate`: the frame loop of object calibration over a recording, then model files.
 #include "firmware_app/calibrate_command.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <vector>
 
@@ -38,9 +39,17 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
 
     std::vector<CalibrationObjectView> views(options.config.maxObjects);
     std::size_t frames = 0;
+    // Every frame is kept for the completion stage; offline, its size is the recording's.
+    std::vector<double> times_s;
+    std::vector<std::size_t> frameEnd;
+    std::vector<Vec3> points_rig_mm;
     Result<FrameSourceSummary> read =
         forEachMarkerFrame(options.input, options.from, [&](const MarkerFrame& frame) -> Status {
             calibrator.update(frame.time_s, frame.points_rig_mm);
+            times_s.push_back(frame.time_s);
+            points_rig_mm.insert(points_rig_mm.end(), frame.points_rig_mm.begin(),
+                                 frame.points_rig_mm.end());
+            frameEnd.push_back(points_rig_mm.size());
             if (options.showProgress && ++frames % 25 == 0)
                 printProgress(progress, frame, calibrator, views);
             return Ok{};
@@ -50,10 +59,26 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     if (!read)
         return read.error();
 
-    std::vector<MarkerModel> models;
+    std::vector<MarkerModel> seeds;
     for (std::size_t i = 0; i < options.config.maxObjects; ++i)
-        models.emplace_back(options.config.maxMarkersPerObject);
-    const std::size_t count = calibrator.exportModels(models);
+        seeds.emplace_back(options.config.maxMarkersPerObject);
+    const std::size_t seedCount = calibrator.exportModels(seeds);
+
+    SessionBuffer session(std::max<std::size_t>(times_s.size(), 1),
+                          std::max<std::size_t>(points_rig_mm.size(), 1));
+    for (std::size_t f = 0; f < times_s.size(); ++f) {
+        const std::size_t begin = f == 0 ? 0 : frameEnd[f - 1];
+        session.append(times_s[f],
+                       std::span<const Vec3>(points_rig_mm).subspan(begin, frameEnd[f] - begin));
+    }
+    CalibrationCompletion completion(options.completion);
+    if (!completion.isValid())
+        return Error{"completion configuration: markers per model must be 4 to " +
+                     std::to_string(MarkerSet::kCapacity)};
+    std::vector<MarkerModel> models;
+    for (std::size_t i = 0; i < options.completion.maxModels; ++i)
+        models.emplace_back(options.completion.maxMarkersPerModel);
+    const std::size_t count = completion.run(session, std::span(seeds).first(seedCount), models);
     for (std::size_t i = 0; i < count; ++i)
         if (Status s = writeModelJson(modelPath(options.out, models[i].id), models[i],
                                       "body " + std::to_string(models[i].id));
@@ -77,6 +102,12 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << c.collapsed << ", found again " << c.refound << "; refused: markers "
             << c.markerOverflow << ", objects " << c.objectOverflow << ", markers in an object "
             << c.memberOverflow << ", clustering deferred " << c.clusteringDeferred << "\n";
+    const CompletionCounters& k = completion.counters();
+    summary << "  completion: " << seedCount << " online models in, " << k.rounds << " rounds; "
+            << k.joinedByMotion + k.joinedByLayout << " pieces joined, " << k.dropped
+            << " dropped; markers added " << k.markersAdded << ", removed " << k.markersRemoved
+            << "; refused: places " << k.siteOverflow << ", models " << k.modelOverflow
+            << ", markers " << k.markerOverflow << "\n";
     return Ok{};
 }
 

@@ -5,6 +5,7 @@
 #include <optional>
 #include <ostream>
 
+#include "core/calibration_completion.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/result.hpp"
 #include "firmware_app/recording/recording.hpp"
@@ -16,6 +17,8 @@ struct CalibrateOptions {
     std::filesystem::path out;
     std::optional<recording::Level> from;
     CalibrationConfig config{};
+    /// The completion stage that turns the online models into the final ones.
+    CompletionConfig completion{};
     /// Rewrite one progress line on \a progress (a terminal) while frames are read.
     bool showProgress = false;
 };
@@ -23,6 +26,9 @@ struct CalibrateOptions {
 /**
  * \brief Run object calibration over every frame of a recording (or .c3d file) and write
  * MODELDIR/body_<id>.json for each object found.
+ *
+ * The online stage (ObjectCalibrator) runs frame by frame as on the board; its models are then
+ * completed over all the recording's frames (CalibrationCompletion), and those are written.
  *
  * MODELDIR must be new or empty. Prints a summary (models, markers, S_min, counters) to
  * \a summary, and progress (frames, objects, markers per object) to \a progress when asked.

@@ -10,6 +10,7 @@
 // RMS position error. Every second it also exports the models so far and reports when they first
 // held every marker that was in view for at least --min-seen-s seconds. Exits 1 on a missed target.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -20,8 +21,10 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/calibration_completion.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
+#include "core/session_buffer.hpp"
 #include "core/stereo_matcher.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
@@ -155,7 +158,8 @@ int main(int argc, char** argv) {
     std::int64_t frames = 3000;
     std::uint64_t seed = 1;
     std::string level = "images";
-    double minSeen_s = 2.0;
+    double minSeen_s = 1.0;
+    bool onlineOnly = false;
     int requireObjects = -1;
     double requireRms = -1.0;
     bool requireComplete = false;
@@ -168,7 +172,11 @@ int main(int argc, char** argv) {
     app.add_option("--frames", frames)->check(CLI::PositiveNumber);
     app.add_option("--seed", seed);
     app.add_option("--level", level)->check(CLI::IsMember({"images", "points"}));
-    app.add_option("--min-seen-s", minSeen_s, "a marker in view this long must be in the model");
+    app.add_option("--min-seen-s", minSeen_s,
+                   "a marker in view this long, with three others of its object, must be in the "
+                   "model");
+    app.add_flag("--online-only", onlineOnly,
+                 "judge the online stage's models, without the completion stage");
     app.add_option("--require-objects", requireObjects, "models that must come out");
     app.add_option("--require-rms", requireRms, "maximum marker RMS error after alignment (mm)");
     app.add_flag("--require-complete", requireComplete,
@@ -197,6 +205,7 @@ int main(int argc, char** argv) {
     const sim::World world(std::move(*scene), seed);
     test::SimFrames simFrames(world, seed, level == "images");
     ObjectCalibrator calibrator(config);
+    SessionBuffer session(static_cast<std::size_t>(frames), static_cast<std::size_t>(frames) * 256);
     std::vector<MarkerModel> models;
     for (std::size_t i = 0; i < config.maxObjects; ++i)
         models.emplace_back(config.maxMarkersPerObject);
@@ -298,6 +307,7 @@ int main(int argc, char** argv) {
     for (std::int64_t f = 0; f < frames; ++f) {
         simFrames.next(static_cast<std::uint64_t>(f), observation, points);
         calibrator.update(observation.time_s, points);
+        session.append(observation.time_s, points);
         if (trace) {
             // The true marker each calibration marker was seen as: first and last label, frames.
             calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
@@ -343,12 +353,19 @@ int main(int argc, char** argv) {
                 }
             }
         }
+        // A marker can be learnt while three others of its object are seen with it.
         sim::separatelyVisible(observation, visible);
+        std::vector<int> visibleOf(layouts.size(), 0);
+        for (const int source : visible)
+            if (static_cast<std::size_t>(source) < observation.markers.size())
+                ++visibleOf[static_cast<std::size_t>(
+                    observation.markers[static_cast<std::size_t>(source)].object)];
         for (const int source : visible)
             if (static_cast<std::size_t>(source) < observation.markers.size()) {
                 const sim::MarkerView& m = observation.markers[static_cast<std::size_t>(source)];
-                ++framesSeen[static_cast<std::size_t>(m.object)]
-                            [static_cast<std::size_t>(m.marker)];
+                if (visibleOf[static_cast<std::size_t>(m.object)] >= 4)
+                    ++framesSeen[static_cast<std::size_t>(m.object)]
+                                [static_cast<std::size_t>(m.marker)];
             }
         if ((f + 1) % perSecond == 0) {
             const std::size_t count = calibrator.exportModels(models);
@@ -392,7 +409,23 @@ int main(int argc, char** argv) {
         for (int n : seen)
             expected.back().push_back(n >= minFrames);
     }
-    const std::size_t count = calibrator.exportModels(models);
+    std::size_t count = calibrator.exportModels(models);
+    const Report online = evaluate(std::span(models).first(count), layouts, expected);
+    CompletionCounters completionCounters;
+    double completion_s = 0.0;
+    if (!onlineOnly) {
+        std::vector<MarkerModel> seeds;
+        for (std::size_t i = 0; i < count; ++i) {
+            seeds.emplace_back(config.maxMarkersPerObject);
+            seeds.back().assign(models[i]);
+        }
+        const auto start = std::chrono::steady_clock::now();
+        CalibrationCompletion completion{CompletionConfig{}};
+        count = completion.run(session, seeds, models);
+        completion_s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        completionCounters = completion.counters();
+    }
     const Report final = evaluate(std::span(models).first(count), layouts, expected);
     double completeAt = -1.0;
     for (const auto& [time_s, saved] : checkpoints)
@@ -406,6 +439,27 @@ int main(int argc, char** argv) {
                 static_cast<long long>(frames),
                 static_cast<double>(frames) / world.scene().frameRate_hz, level.c_str(),
                 static_cast<unsigned long long>(seed));
+    if (!onlineOnly) {
+        std::printf("online stage: models %zu, stray %zu, false markers %zu, %s\n", online.models,
+                    online.strayModels, online.falseMarkers,
+                    complete(online) ? "complete" : "incomplete");
+        const CompletionCounters& k = completionCounters;
+        std::printf("completion: %.2f s, %llu seeds, %llu rounds, joined %llu by motion, %llu "
+                    "by layout and %llu by handover, dropped %llu, markers added %llu and removed "
+                    "%llu, overflow "
+                    "sites/models/markers %llu/%llu/%llu\n",
+                    completion_s, static_cast<unsigned long long>(k.seeds),
+                    static_cast<unsigned long long>(k.rounds),
+                    static_cast<unsigned long long>(k.joinedByMotion),
+                    static_cast<unsigned long long>(k.joinedByLayout),
+                    static_cast<unsigned long long>(k.joinedByHandover),
+                    static_cast<unsigned long long>(k.dropped),
+                    static_cast<unsigned long long>(k.markersAdded),
+                    static_cast<unsigned long long>(k.markersRemoved),
+                    static_cast<unsigned long long>(k.siteOverflow),
+                    static_cast<unsigned long long>(k.modelOverflow),
+                    static_cast<unsigned long long>(k.markerOverflow));
+    }
     std::printf("models %zu (objects in scene %zu), stray models %zu, false markers %zu\n",
                 final.models, layouts.size(), final.strayModels, final.falseMarkers);
     for (std::size_t k = 0; k < final.objects.size(); ++k) {
@@ -436,9 +490,10 @@ int main(int argc, char** argv) {
     if (trace)
         printOffMembers(frames);
     if (completeAt >= 0.0)
-        std::printf("complete after %.0f s of motion\n", completeAt);
+        std::printf("online stage complete after %.0f s of motion\n", completeAt);
     else
-        std::printf("never complete\n");
+        std::printf("online stage never complete\n");
+    std::printf("result: %s\n", complete(final, allowMissing) ? "right" : "WRONG");
     std::printf(
         "counters: born %llu, reappeared %llu, invalid %llu, edges broken %llu, splits %llu,"
         " collapsed %llu, merged %llu, deferred %llu, refound %llu (budget out %llu),"
