@@ -183,7 +183,7 @@ TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.05);
 }
 
-// The same frames with each frame's points in another order give the same models, bit for bit:
+// The same frames with each frame's points in four other orders give the same models, bit for bit
 // the online stage and completion both put every frame in one order first.
 TEST(CalibrationCompletion, SameModelsWhateverTheOrderOfPointsInAFrame) {
     const std::vector<std::vector<Vec3>> bodies{test::irregularLayout(9, 13, 15.0),
@@ -230,7 +230,7 @@ TEST(CalibrationCompletion, SameModelsWhateverTheOrderOfPointsInAFrame) {
     };
     const std::vector<MarkerModel> reference = learn(0);
     ASSERT_GE(reference.size(), 1U);
-    for (unsigned order = 1; order <= 10; ++order) {
+    for (unsigned order = 1; order <= 4; ++order) {
         const std::vector<MarkerModel> models = learn(order);
         ASSERT_EQ(models.size(), reference.size()) << "order " << order;
         for (std::size_t m = 0; m < models.size(); ++m) {
