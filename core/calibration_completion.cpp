@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <numeric>
 #include <optional>
 
@@ -17,7 +18,7 @@ constexpr std::size_t kCellBits = 16;
 constexpr std::size_t kCells = std::size_t{1} << kCellBits;
 /// Relative poses tried as the consensus of two objects' motion.
 constexpr std::size_t kConsensusCandidates = 32;
-constexpr double kDegree = 3.14159265358979323846 / 180.0;
+constexpr double kDegree = std::numbers::pi / 180.0;
 /// Directions a place was seen from that are kept (thinned to half the same-view angle).
 constexpr std::size_t kMaxViewDirections = 256;
 /// Points within this many site radii of a marker's place are that marker when refining.
@@ -70,14 +71,6 @@ RigidTransform meanTransform(std::span<const RigidTransform> transforms, const E
     centre /= static_cast<double>(transforms.size());
     mean.translation_mm = centre - mean.rotation * ball.centre;
     return mean;
-}
-
-bool lexicographicLess(const Vec3& a, const Vec3& b) {
-    if (a.x() != b.x())
-        return a.x() < b.x();
-    if (a.y() != b.y())
-        return a.y() < b.y();
-    return a.z() < b.z();
 }
 
 /// The transform that puts the most markers of \a part onto markers of \a whole (within
@@ -607,7 +600,7 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::sort(candidates.begin(), candidates.end(), [&](std::size_t a, std::size_t b) {
         if (sites_[a].hits != sites_[b].hits)
             return sites_[a].hits > sites_[b].hits;
-        return lexicographicLess(sites_[a].sum_mm, sites_[b].sum_mm);
+        return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
     });
     std::vector<Vec3> place;
     const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;

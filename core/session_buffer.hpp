@@ -11,6 +11,15 @@
 
 namespace edgetrack {
 
+/// \brief The canonical order of points: by x, then y, then z.
+inline bool canonicallyBefore(const Vec3& a, const Vec3& b) {
+    if (a.x() != b.x())
+        return a.x() < b.x();
+    if (a.y() != b.y())
+        return a.y() < b.y();
+    return a.z() < b.z();
+}
+
 /**
  * \brief Put a frame's points in one order whatever order they came in: by x, then y, then z.
  *
@@ -18,13 +27,7 @@ namespace edgetrack {
  * learns from points first puts them in this order, so that its result cannot depend on it.
  */
 inline void sortPointsCanonically(std::span<Vec3> points_mm) {
-    std::sort(points_mm.begin(), points_mm.end(), [](const Vec3& a, const Vec3& b) {
-        if (a.x() != b.x())
-            return a.x() < b.x();
-        if (a.y() != b.y())
-            return a.y() < b.y();
-        return a.z() < b.z();
-    });
+    std::sort(points_mm.begin(), points_mm.end(), canonicallyBefore);
 }
 
 /**
