@@ -14,12 +14,12 @@ namespace fs = std::filesystem;
 
 namespace {
 
-void printProgress(std::ostream& progress, const MarkerFrame& frame,
+void printProgress(std::ostream& progress, std::size_t frame, double time_s,
                    const ObjectCalibrator& calibrator, std::vector<CalibrationObjectView>& views) {
     const std::size_t count = calibrator.objectViews(views);
     char line[160];
-    std::snprintf(line, sizeof line, "\rcalibrate: frame %lld (%.1f s), %zu objects:",
-                  static_cast<long long>(frame.frame), frame.time_s, count);
+    std::snprintf(line, sizeof line, "\rcalibrate: frame %zu (%.1f s), %zu objects:", frame,
+                  time_s, count);
     progress << line;
     for (std::size_t i = 0; i < count && i < 8; ++i)
         progress << ' ' << views[i].established << '/' << views[i].markers;
@@ -30,62 +30,52 @@ void printProgress(std::ostream& progress, const MarkerFrame& frame,
 
 Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
                     std::ostream& progress) {
-    ObjectCalibrator calibrator(options.config);
-    if (!calibrator.isValid())
-        return Error{"calibration configuration: markers per object must be 4 to " +
-                     std::to_string(MarkerSet::kCapacity)};
     if (Status s = prepareOutputDirectory(options.out); !s)
         return s;
 
-    std::vector<CalibrationObjectView> views(options.config.maxObjects);
-    std::size_t frames = 0;
-    // Every frame is kept for the completion stage; offline, its size is the recording's.
+    // Every frame is kept for the completion stage; offline, its room is the recording's size,
+    // so the recording is read first.
     std::vector<double> times_s;
     std::vector<std::size_t> frameEnd;
     std::vector<Vec3> points_rig_mm;
     Result<FrameSourceSummary> read =
         forEachMarkerFrame(options.input, options.from, [&](const MarkerFrame& frame) -> Status {
-            calibrator.update(frame.time_s, frame.points_rig_mm);
             times_s.push_back(frame.time_s);
             points_rig_mm.insert(points_rig_mm.end(), frame.points_rig_mm.begin(),
                                  frame.points_rig_mm.end());
             frameEnd.push_back(points_rig_mm.size());
-            if (options.showProgress && ++frames % 25 == 0)
-                printProgress(progress, frame, calibrator, views);
+            if (options.showProgress && times_s.size() % 25 == 0)
+                progress << "\rcalibrate: read frame " << frame.frame << std::flush;
             return Ok{};
         });
-    if (options.showProgress)
-        progress << "\n";
     if (!read)
         return read.error();
 
-    std::vector<MarkerModel> seeds;
-    for (std::size_t i = 0; i < options.config.maxObjects; ++i)
-        seeds.emplace_back(options.config.maxMarkersPerObject);
-    const std::size_t seedCount = calibrator.exportModels(seeds);
-
-    SessionBuffer session(std::max<std::size_t>(times_s.size(), 1),
-                          std::max<std::size_t>(points_rig_mm.size(), 1));
+    CalibrationSession session(options.config, options.completion,
+                               std::max<std::size_t>(times_s.size(), 1),
+                               std::max<std::size_t>(points_rig_mm.size(), 1));
+    if (!session.isValid())
+        return Error{"calibration configuration: markers per object and per model must be 4 to " +
+                     std::to_string(MarkerSet::kCapacity)};
+    std::vector<CalibrationObjectView> views(options.config.maxObjects);
     for (std::size_t f = 0; f < times_s.size(); ++f) {
         const std::size_t begin = f == 0 ? 0 : frameEnd[f - 1];
-        session.append(times_s[f],
+        session.update(times_s[f],
                        std::span<const Vec3>(points_rig_mm).subspan(begin, frameEnd[f] - begin));
+        if (options.showProgress && (f + 1) % 25 == 0)
+            printProgress(progress, f, times_s[f], session.online(), views);
     }
-    CalibrationCompletion completion(options.completion);
-    if (!completion.isValid())
-        return Error{"completion configuration: markers per model must be 4 to " +
-                     std::to_string(MarkerSet::kCapacity)};
-    std::vector<MarkerModel> models;
-    for (std::size_t i = 0; i < options.completion.maxModels; ++i)
-        models.emplace_back(options.completion.maxMarkersPerModel);
-    const std::size_t count = completion.run(session, std::span(seeds).first(seedCount), models);
+    if (options.showProgress)
+        progress << "\n";
+    const std::vector<MarkerModel> models = session.complete();
+    const std::size_t count = models.size();
     for (std::size_t i = 0; i < count; ++i)
         if (Status s = writeModelJson(modelPath(options.out, models[i].id), models[i],
                                       "body " + std::to_string(models[i].id));
             !s)
             return s;
 
-    const CalibrationCounters& c = calibrator.counters();
+    const CalibrationCounters& c = session.online().counters();
     summary << "edgetrack calibrate: " << read->frames << " frames from " << read->level << ", "
             << read->points << " markers; " << count << (count == 1 ? " model" : " models")
             << " written to " << options.out.string() << "\n";
@@ -102,8 +92,8 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << c.collapsed << ", found again " << c.refound << "; refused: markers "
             << c.markerOverflow << ", objects " << c.objectOverflow << ", markers in an object "
             << c.memberOverflow << ", clustering deferred " << c.clusteringDeferred << "\n";
-    const CompletionCounters& k = completion.counters();
-    summary << "  completion: " << seedCount << " online models in, " << k.rounds << " rounds; "
+    const CompletionCounters& k = session.completionCounters();
+    summary << "  completion: " << session.seedsUsed() << " online models in, " << k.rounds << " rounds; "
             << k.joinedByMotion + k.joinedByLayout << " pieces joined, " << k.dropped
             << " dropped; markers added " << k.markersAdded << ", removed " << k.markersRemoved
             << "; refused: places " << k.siteOverflow << ", models " << k.modelOverflow

@@ -5,7 +5,7 @@
 #include <optional>
 #include <ostream>
 
-#include "core/calibration_completion.hpp"
+#include "core/calibration_session.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/result.hpp"
 #include "firmware_app/recording/recording.hpp"

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "core/calibration_completion.hpp"
+#include "core/calibration_session.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/session_buffer.hpp"
 #include "tests/support/layouts.hpp"
@@ -207,25 +208,14 @@ TEST(CalibrationCompletion, SameModelsWhateverTheOrderOfPointsInAFrame) {
     }
     auto learn = [&](unsigned shuffleSeed) {
         std::mt19937 shuffler(shuffleSeed);
-        CalibrationConfig online;
-        ObjectCalibrator calibrator(online);
-        SessionBuffer session(frames, frames * 32);
+        CalibrationSession session(CalibrationConfig{}, CompletionConfig{}, frames, frames * 32);
         for (std::size_t f = 0; f < frames; ++f) {
             std::vector<Vec3> points = recording[f];
             if (shuffleSeed != 0)
                 std::shuffle(points.begin(), points.end(), shuffler);
-            const double t = static_cast<double>(f) / 100.0;
-            calibrator.update(t, points);
-            session.append(t, points);
+            session.update(static_cast<double>(f) / 100.0, points);
         }
-        std::vector<MarkerModel> seeds;
-        for (std::size_t i = 0; i < online.maxObjects; ++i)
-            seeds.emplace_back(online.maxMarkersPerObject);
-        seeds.resize(calibrator.exportModels(seeds));
-        const CompletionConfig config;
-        CalibrationCompletion completion(config);
-        std::vector<MarkerModel> out = outputModels(config);
-        out.resize(completion.run(session, seeds, out));
+        std::vector<MarkerModel> out = session.complete();
         return out;
     };
     const std::vector<MarkerModel> reference = learn(0);

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "core/calibration_completion.hpp"
+#include "core/calibration_session.hpp"
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
@@ -121,29 +122,17 @@ TEST(CalibrationRealData, ViconBoxCompletedTheSameWhateverTheOrderOfPoints) {
     const std::vector<Vec3> layout = labelledBox(*c3d, boxPoints(*c3d));
 
     auto learn = [&](unsigned shuffleSeed) {
-        CalibrationConfig config;
-        ObjectCalibrator calibrator(config);
-        SessionBuffer session(c3d->frameCount, c3d->frameCount * 64);
+        CalibrationSession session(CalibrationConfig{}, CompletionConfig{}, c3d->frameCount,
+                                   c3d->frameCount * 64);
         std::mt19937 shuffler(shuffleSeed);
         std::vector<Vec3> points;
         for (std::size_t f = 0; f < c3d->frameCount; ++f) {
             framePoints(*c3d, f, points);
             if (shuffleSeed != 0)
                 std::shuffle(points.begin(), points.end(), shuffler);
-            const double t = static_cast<double>(f) / c3d->frameRate_hz;
-            calibrator.update(t, points);
-            session.append(t, points);
+            session.update(static_cast<double>(f) / c3d->frameRate_hz, points);
         }
-        std::vector<MarkerModel> seeds;
-        for (std::size_t i = 0; i < config.maxObjects; ++i)
-            seeds.emplace_back(config.maxMarkersPerObject);
-        seeds.resize(calibrator.exportModels(seeds));
-        const CompletionConfig completionConfig;
-        CalibrationCompletion completion(completionConfig);
-        std::vector<MarkerModel> models;
-        for (std::size_t i = 0; i < completionConfig.maxModels; ++i)
-            models.emplace_back(completionConfig.maxMarkersPerModel);
-        models.resize(completion.run(session, seeds, models));
+        std::vector<MarkerModel> models = session.complete();
         return models;
     };
     const std::vector<MarkerModel> models = learn(0);
