@@ -137,6 +137,7 @@ Status SimFlash::read(std::size_t offset, std::span<std::uint8_t> out) {
 }
 
 Status SimFlash::erase(std::size_t offset, std::size_t length) {
+    waitWhileHeld();
     if (Status s = checkRange("erase", offset, length); !s)
         return s;
     if (offset % eraseBlockSize_ != 0 || length % eraseBlockSize_ != 0)
@@ -151,6 +152,7 @@ Status SimFlash::erase(std::size_t offset, std::size_t length) {
 }
 
 Status SimFlash::write(std::size_t offset, std::span<const std::uint8_t> data) {
+    waitWhileHeld();
     if (Status s = checkRange("write", offset, data.size()); !s)
         return s;
     const std::size_t landed = landing(data.size());
@@ -171,6 +173,31 @@ void SimFlash::cutPowerAfter(std::uint64_t operations, double tornShare) {
 void SimFlash::restorePower() {
     powered_ = true;
     cutArmed_ = false;
+}
+
+void SimFlash::holdOperations() {
+    const std::lock_guard lock(holdMutex_);
+    held_ = true;
+}
+
+void SimFlash::releaseOperations() {
+    {
+        const std::lock_guard lock(holdMutex_);
+        held_ = false;
+    }
+    released_.notify_all();
+}
+
+bool SimFlash::operationWaiting() const {
+    const std::lock_guard lock(holdMutex_);
+    return waiting_;
+}
+
+void SimFlash::waitWhileHeld() {
+    std::unique_lock lock(holdMutex_);
+    waiting_ = held_;
+    released_.wait(lock, [this] { return !held_; });
+    waiting_ = false;
 }
 
 // ---------------------------------------------------------------------------------------------

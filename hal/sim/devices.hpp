@@ -2,7 +2,9 @@
 #pragma once
 
 #include <array>
+#include <condition_variable>
 #include <cstdint>
+#include <mutex>
 #include <string_view>
 #include <vector>
 
@@ -136,6 +138,12 @@ public:
     void cutPowerAfter(std::uint64_t operations, double tornShare = 0.5);
     void restorePower();
     bool powered() const { return powered_; }
+    /// \brief A busy flash (a slow SD card): erases and writes wait, in whatever thread makes
+    /// them, until releaseOperations().
+    void holdOperations();
+    void releaseOperations();
+    /// \return whether an operation is waiting for releaseOperations().
+    bool operationWaiting() const;
     /// \return erase and write operations performed since construction.
     std::uint64_t operations() const { return operations_; }
 
@@ -146,6 +154,7 @@ private:
     Status checkRange(const char* what, std::size_t offset, std::size_t length) const;
     /// \return how much of an operation of \a length lands: all, or a torn part with power lost.
     std::size_t landing(std::size_t length);
+    void waitWhileHeld();
 
     std::vector<std::uint8_t> contents_;
     std::size_t eraseBlockSize_;
@@ -154,6 +163,10 @@ private:
     bool cutArmed_ = false;
     double tornShare_ = 0.5;
     bool powered_ = true;
+    mutable std::mutex holdMutex_;
+    std::condition_variable released_;
+    bool held_ = false;
+    bool waiting_ = false;
 };
 
 /**
