@@ -35,6 +35,25 @@ constexpr std::size_t kMaxPreviewMarkers = 128;
 constexpr std::size_t kDatagramBytes = 8192;
 constexpr hal::Nanoseconds kDay = 86400 * hal::kNanosecondsPerSecond;
 
+/// The completion stage as the board runs it: the calibration's own capacities and S_min, markers
+/// seen from between the two cameras.
+CompletionConfig completionFor(const FirmwareConfig& config, const StereoRig& rig) {
+    CompletionConfig c = config.completion;
+    c.maxModels = config.calibration.maxObjects;
+    c.maxMarkersPerModel = config.calibration.maxMarkersPerObject;
+    c.minModelMarkers = config.calibration.minModelMarkers;
+    c.smin = config.calibration.smin;
+    c.viewpoint_rig_mm = 0.5 * (rig.camera(0).centre_rig_mm() + rig.camera(1).centre_rig_mm());
+    return c;
+}
+
+/// Frames a session can last: its longest duration at the camera rate, and a margin for jitter.
+std::size_t sessionFrames(const FirmwareConfig& config) {
+    return static_cast<std::size_t>(
+               std::ceil(config.session.maxDuration_s * config.cameras.frameRate_hz * 1.05)) +
+           16;
+}
+
 } // namespace
 
 const char* stateName(FirmwareState state) {
@@ -43,6 +62,8 @@ const char* stateName(FirmwareState state) {
         return "tracking";
     case FirmwareState::Calibrating:
         return "calibrating";
+    case FirmwareState::Finishing:
+        return "finishing";
     case FirmwareState::Degraded:
         return "degraded";
     }
@@ -71,7 +92,8 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
     , stereo_(rig, config.stereo, config.blobs.maxBlobs)
     , stereoMarkers_(config.stereo.maxMarkers)
     , points_rig_mm_(config.stereo.maxMarkers)
-    , calibrator_(config.calibration)
+    , calibration_(config.calibration, completionFor(config, rig), sessionFrames(config),
+                   sessionFrames(config) * config.session.bufferPointsPerFrame)
     , store_(board.flash, MarkerSet::kCapacity)
     , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s)) {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
@@ -79,9 +101,9 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
         error_ = "the rig's two cameras must have the same image size";
     for (std::optional<BlobDetector>& detector : detectors_)
         detector.emplace(config.blobs, width_px_, height_px_);
-    if (!calibrator_.isValid())
+    if (!calibration_.isValid())
         error_ = "[calibration] settings are unusable (markers per object must be 4 to " +
-                 std::to_string(MarkerSet::kCapacity) + ")";
+                 std::to_string(MarkerSet::kCapacity) + ", the session buffer not empty)";
     if (!store_.isValid())
         error_ = "the flash partition cannot hold two model slots";
     tracker_.emplace(std::span<const MarkerModel>{}, config.tracking);
@@ -89,8 +111,6 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
         error_ = "[tracking] settings are unusable";
 
     objectViews_.resize(config.calibration.maxObjects);
-    for (std::size_t i = 0; i < config.calibration.maxObjects; ++i)
-        learnt_.emplace_back(config.calibration.maxMarkersPerObject);
     models_.reserve(config.maxModels);
     filters_.assign(config.maxModels, PoseFilter(config.filter));
     outputPoses_.resize(config.maxModels);
@@ -132,6 +152,8 @@ void Firmware::start() {
 }
 
 void Firmware::stop() {
+    // A finishing calibration's models are saved before the board stops: never lost.
+    waitForFinishing();
     board_.cameras.stop();
     board_.ledRing.setContinuous(false);
     board_.statusLed.set(false);
@@ -153,6 +175,7 @@ Status Firmware::replaceModels(std::vector<NamedModel> models) {
     if (models.size() > config_.maxModels)
         return Error{std::to_string(models.size()) + " models; [tracking] max_models is " +
                      std::to_string(config_.maxModels)};
+    waitForFinishing();
     Status saved = store_.save(models);
     if (!saved)
         ++counters_.flashErrors;
@@ -161,13 +184,13 @@ Status Firmware::replaceModels(std::vector<NamedModel> models) {
 }
 
 std::span<const TrackedBody> Firmware::bodies() const {
-    if (state_ != FirmwareState::Tracking)
+    if (!tracksModels())
         return {};
     return tracker_->bodies();
 }
 
 std::size_t Firmware::calibrationObjects() const {
-    return state_ == FirmwareState::Calibrating ? calibrator_.objectCount() : 0;
+    return state_ == FirmwareState::Calibrating ? calibration_.online().objectCount() : 0;
 }
 
 void Firmware::note(std::string event) {
@@ -183,6 +206,16 @@ void Firmware::handleButton(hal::Nanoseconds now) {
         button_.edge(edge);
     for (ButtonEvent event = button_.poll(now); event != ButtonEvent::None;
          event = button_.poll(now)) {
+        if (finisher_.busy()) {
+            // The worker owns the session and the flash until it is done.
+            if (event == ButtonEvent::LongPress) {
+                deletePending_ = true;
+                note("long press: the models will be deleted once the calibration has finished");
+            } else {
+                note("button ignored: the last calibration is still finishing");
+            }
+            continue;
+        }
         if (event == ButtonEvent::LongPress) {
             deleteModels();
             continue;
@@ -197,7 +230,7 @@ void Firmware::handleButton(hal::Nanoseconds now) {
 }
 
 void Firmware::startCalibration() {
-    calibrator_.reset();
+    calibration_.reset();
     calibrationStart_s_ = hal::toSeconds(board_.clock.now());
     calibrationChanged_s_ = calibrationStart_s_;
     calibrationSignature_ = 0;
@@ -208,10 +241,14 @@ void Firmware::startCalibration() {
 }
 
 void Firmware::calibrationStep(double time_s) {
-    calibrator_.update(time_s, points_rig_mm_.span());
+    if (!calibration_.update(time_s, points_rig_mm_.span())) {
+        ++counters_.sessionFramesRefused;
+        finishCalibration("its full session buffer");
+        return;
+    }
     // The session settles when the objects that would be exported, and their markers, stop
     // changing.
-    const std::size_t views = calibrator_.objectViews(objectViews_);
+    const std::size_t views = calibration_.online().objectViews(objectViews_);
     std::size_t objects = 0;
     std::size_t markers = 0;
     for (std::size_t i = 0; i < views; ++i)
@@ -233,43 +270,77 @@ void Firmware::calibrationStep(double time_s) {
 }
 
 void Firmware::finishCalibration(const char* why) {
-    state_ = FirmwareState::Tracking;
     char lasted[32];
     std::snprintf(lasted, sizeof lasted, " after %.1f s", frameTime_s_ - calibrationStart_s_);
-    const std::size_t count = calibrator_.exportModels(learnt_);
-    if (count == 0) {
+    finishingEvent_ = std::string("calibration ended by ") + why + lasted;
+    std::size_t objects = 0;
+    const std::size_t views = calibration_.online().objectViews(objectViews_);
+    for (std::size_t i = 0; i < views; ++i)
+        objects += objectViews_[i].established >= config_.calibration.minModelMarkers ? 1u : 0u;
+    if (objects == 0) {
+        state_ = FirmwareState::Tracking;
         ++counters_.calibrationsEmpty;
         tracker_->reset();
-        note(std::string("calibration ended by ") + why + lasted +
-             ": no object learnt; models unchanged");
+        note(finishingEvent_ + ": no object learnt; models unchanged");
         return;
     }
-    MergedModels merge = mergeLearntModels(models_, std::span(learnt_).first(count),
-                                           config_.maxModels, config_.calibration.smin);
+    // Completion and the save run beside the frame loop; the models from before are tracked
+    // until the new ones are in use.
+    state_ = FirmwareState::Finishing;
+    tracker_->reset();
+    finisher_.start(calibration_, copyOf(models_), config_.maxModels, config_.calibration.smin,
+                    store_);
+    note(finishingEvent_ + ": finishing " + std::to_string(objects) + " objects");
+}
+
+void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
+    if (state_ == FirmwareState::Finishing)
+        state_ = FirmwareState::Tracking;
+    lastFinish_s_ = finished.took_s;
+    char took[48];
+    std::snprintf(took, sizeof took, ", completed in %.2f s", finished.took_s);
+    const std::string event = finishingEvent_ + took;
+    if (deletePending_) {
+        deletePending_ = false;
+        if (finished.learnt > 0)
+            ++(finished.saved ? counters_.calibrationsSaved : counters_.flashErrors);
+        deleteModels();
+        note(event + "; its models deleted by the long press meanwhile");
+        return;
+    }
+    if (finished.learnt == 0) {
+        ++counters_.calibrationsEmpty;
+        note(event + ": no object learnt; models unchanged");
+        return;
+    }
+    const MergedModels& merge = finished.merged;
     counters_.fragmentsDropped += merge.fragments;
     counters_.modelOverflow += merge.refused;
-    std::vector<NamedModel>& merged = merge.models;
-    const Status saved = store_.save(merged);
-    std::string event = std::string("calibration ended by ") + why + lasted + ": " +
-                        std::to_string(merge.added) + " new, " + std::to_string(merge.updated) +
-                        " updated; " + std::to_string(merged.size()) + " models (";
-    for (std::size_t i = 0; i < merged.size(); ++i)
-        event += (i ? ", " : "") + std::to_string(merged[i].model.markers_model_mm.size());
-    event += " markers)";
+    std::string text = event + ": " + std::to_string(merge.added) + " new, " +
+                       std::to_string(merge.updated) + " updated; " +
+                       std::to_string(merge.models.size()) + " models (";
+    for (std::size_t i = 0; i < merge.models.size(); ++i)
+        text += (i ? ", " : "") + std::to_string(merge.models[i].model.markers_model_mm.size());
+    text += " markers)";
     if (merge.fragments > 0)
-        event += "; " + std::to_string(merge.fragments) + " fragment" +
-                 (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
+        text += "; " + std::to_string(merge.fragments) + " fragment" +
+                (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
     if (merge.refused > 0)
-        event += "; " + std::to_string(merge.refused) + " refused (max_models)";
-    if (saved) {
+        text += "; " + std::to_string(merge.refused) + " refused (max_models)";
+    if (finished.saved) {
         ++counters_.calibrationsSaved;
-        event += ", saved to flash";
+        text += ", saved to flash";
     } else {
         ++counters_.flashErrors;
-        event += ", NOT saved to flash (" + saved.error().message + ")";
+        text += ", NOT saved to flash (" + finished.saved.error().message + ")";
     }
-    setModels(std::move(merged));
-    note(std::move(event));
+    setModels(std::move(finished.merged.models));
+    note(std::move(text));
+}
+
+void Firmware::waitForFinishing() {
+    if (std::optional<FinishedCalibration> finished = finisher_.wait())
+        takeFinishedCalibration(std::move(*finished));
 }
 
 void Firmware::deleteModels() {
@@ -294,6 +365,9 @@ void Firmware::deleteModels() {
 
 void Firmware::step() {
     const hal::Nanoseconds now = board_.clock.now();
+    if (finisher_.busy())
+        if (std::optional<FinishedCalibration> finished = finisher_.poll())
+            takeFinishedCalibration(std::move(*finished));
     handleButton(now);
     if (state_ == FirmwareState::Degraded) {
         retryCameras(now);
@@ -437,14 +511,14 @@ void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acqui
     lastLatency_s_ = latency_s;
     if (config_.udp.enabled)
         sendDtrack(frame, latency_s);
-    if (config_.can.enabled && state_ == FirmwareState::Tracking)
+    if (config_.can.enabled && tracksModels())
         sendCan(frame, latency_s);
 }
 
 void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
     dtrackBodies_.clear();
     dtrackMarkers_.clear();
-    if (state_ == FirmwareState::Tracking) {
+    if (tracksModels()) {
         const std::span<const TrackedBody> tracked = tracker_->bodies();
         for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
             if (tracked[b].found())
@@ -454,7 +528,7 @@ void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
         lastPreview_s_ = frameTime_s_;
         // The growing models where they are now: established members, id = object * 1000 +
         // marker, so a viewer can colour them by object.
-        calibrator_.forEachMember([&](const ObjectCalibrator::MemberView& m) {
+        calibration_.online().forEachMember([&](const ObjectCalibrator::MemberView& m) {
             if (m.established && dtrackMarkers_.size() < kMaxPreviewMarkers)
                 dtrackMarkers_.push_back(
                     {m.objectId * 1000 + m.markerId % 1000, 1.0, m.position_rig_mm});
@@ -568,7 +642,7 @@ void Firmware::retryCameras(hal::Nanoseconds now) {
     board_.ledRing.setContinuous(true);
     lastFrameAt_ = board_.clock.now();
     tracker_->reset();
-    state_ = FirmwareState::Tracking;
+    state_ = finisher_.busy() ? FirmwareState::Finishing : FirmwareState::Tracking;
     note("cameras restarted");
 }
 
@@ -580,6 +654,8 @@ void Firmware::updateStatusLed(hal::Nanoseconds now) {
         pattern = LedPattern::FastBlink;
     else if (state_ == FirmwareState::Calibrating)
         pattern = LedPattern::Blink;
+    else if (state_ == FirmwareState::Finishing)
+        pattern = LedPattern::Finishing;
     else if (std::any_of(tracker_->bodies().begin(), tracker_->bodies().end(),
                          [](const TrackedBody& b) { return b.found(); }))
         pattern = LedPattern::On;
@@ -673,6 +749,10 @@ std::string Firmware::statusReport() const {
     row("calibrations saved", c.calibrationsSaved);
     row("calibrations with no object", c.calibrationsEmpty);
     row("calibrations abandoned", c.calibrationsAbandoned);
+    row("calibration frames refused (buffer)", c.sessionFramesRefused);
+    std::snprintf(line, sizeof line, "%-34s %.2f\n", "last calibration completed in (s)",
+                  lastFinish_s_);
+    out += line;
     row("models refused (max_models)", c.modelOverflow);
     row("learnt fragments dropped", c.fragmentsDropped);
     row("model deletions", c.modelDeletions);

@@ -10,11 +10,12 @@
 
 #include "core/blob_detector.hpp"
 #include "core/bounded_vector.hpp"
+#include "core/calibration_session.hpp"
 #include "core/model_tracker.hpp"
-#include "core/object_calibrator.hpp"
 #include "core/pose_filter.hpp"
 #include "core/stereo_matcher.hpp"
 #include "firmware_app/button_input.hpp"
+#include "firmware_app/calibration_finisher.hpp"
 #include "firmware_app/firmware_config.hpp"
 #include "firmware_app/model_store.hpp"
 #include "firmware_app/output/dtrack.hpp"
@@ -28,6 +29,9 @@ enum class FirmwareState : std::uint8_t {
     Tracking,
     /// A field calibration is learning objects; their growing models are sent as markers.
     Calibrating,
+    /// A calibration has ended and its models are being completed and saved in a worker thread;
+    /// meanwhile the models from before are tracked and sent as in Tracking.
+    Finishing,
     /// The cameras are gone: nothing is sent and the cameras are restarted every retry_s.
     Degraded,
 };
@@ -80,6 +84,8 @@ struct FirmwareCounters {
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;
     std::uint64_t calibrationsAbandoned = 0;
+    /// Calibration frames the session buffer had no room for (the session then ends).
+    std::uint64_t sessionFramesRefused = 0;
     /// Learnt models that did not fit max_models.
     std::uint64_t modelOverflow = 0;
     /// Learnt objects whose layout is part of a body with more than twice their markers.
@@ -92,9 +98,10 @@ struct FirmwareCounters {
  * \brief The firmware on one board: owns every stage's storage and runs the frame loop.
  *
  * The constructor allocates everything a frame needs from the configuration (buffers, blob and
- * marker capacities, calibrator, queues); step() then allocates nothing while tracking. Loading
- * and saving models (start-up, the end of a calibration, a long press) allocates: those are state
- * changes, not frames.
+ * marker capacities, calibration session and its frame buffer, queues); step() then allocates
+ * nothing while tracking or calibrating. Loading and saving models (start-up, a long press)
+ * allocates: those are state changes, not frames. A calibration's end (completion, merge, save)
+ * runs in a CalibrationFinisher's worker thread while step() goes on tracking.
  *
  * One step() handles the button, waits for the next paired frame (at most a frame period and a
  * bit), drains any other completed frames into the capture queue (dropping the oldest when it is
@@ -129,6 +136,8 @@ public:
     std::span<const TrackedBody> bodies() const;
     /// \return how many objects the running calibration holds (0 when not calibrating).
     std::size_t calibrationObjects() const;
+    /// \brief Wait until a finishing calibration's models are in use (tests; shutting down).
+    void waitForFinishing();
     const FirmwareCounters& counters() const { return counters_; }
     const StageTime& stageTime(Stage stage) const {
         return stageTimes_[static_cast<std::size_t>(stage)];
@@ -150,6 +159,11 @@ private:
     void handleButton(hal::Nanoseconds now);
     void startCalibration();
     void finishCalibration(const char* why);
+    void takeFinishedCalibration(FinishedCalibration finished);
+    /// Tracking or Finishing: the known models are tracked and sent.
+    bool tracksModels() const {
+        return state_ == FirmwareState::Tracking || state_ == FirmwareState::Finishing;
+    }
     void deleteModels();
     void setModels(std::vector<NamedModel> models);
 
@@ -186,9 +200,14 @@ private:
     std::vector<PoseFilter> filters_;
     /// Per body: the pose sent (filtered when the filter is on), model to rig (mm).
     std::vector<RigidTransform> outputPoses_;
-    ObjectCalibrator calibrator_;
+    CalibrationSession calibration_;
+    CalibrationFinisher finisher_;
     std::vector<CalibrationObjectView> objectViews_;
-    std::vector<MarkerModel> learnt_;
+    /// "calibration ended by ... after ... s", kept until the finished models are in use.
+    std::string finishingEvent_;
+    /// A long press while finishing: the models are deleted once the worker is done.
+    bool deletePending_ = false;
+    double lastFinish_s_ = 0.0;
     std::vector<NamedModel> models_;
     ModelStore store_;
 

@@ -232,7 +232,8 @@ void readMarkers(Section& s, FrameToFrameConfig& c) {
     s.integer("max_markers", c.maxMarkers, 1, 65535);
 }
 
-void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSettings& session) {
+void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSettings& session,
+                     CompletionConfig& completion) {
     s.integer("max_objects", c.maxObjects, 1, 1024);
     s.integer("max_markers_per_object", c.maxMarkersPerObject, 4,
               static_cast<std::int64_t>(MarkerSet::kCapacity));
@@ -255,6 +256,11 @@ void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSetting
     s.real("settle_s", session.settle_s, 0.1, 3600.0);
     s.real("max_duration_s", session.maxDuration_s, 1.0, 3600.0);
     s.real("preview_rate_hz", session.previewRate_hz, 0.0, 1000.0);
+    s.integer("buffer_points_per_frame", session.bufferPointsPerFrame, 1, 4096);
+    s.real("place_radius_mm", completion.siteRadius_mm, 0.0, Section::kNoLimit, true);
+    s.real("min_seen_s", completion.minSeen_s, 0.0, 3600.0);
+    s.real("min_seen_share", completion.minSeenShare, 0.0, 1.0);
+    s.real("same_body_tolerance_mm", completion.sameBodyTolerance_mm, 0.0, Section::kNoLimit, true);
     s.require(session.maxDuration_s >= session.minDuration_s, "max_duration_s",
               "must be >= min_duration_s");
 }
@@ -393,8 +399,9 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
     read(root, "stereo", "stereo", [&](Section& s) { readStereo(s, config.stereo); });
     read(root, "markers", "markers",
          [&](Section& s) { readMarkers(s, config.calibration.tracking); });
-    read(root, "calibration", "calibration",
-         [&](Section& s) { readCalibration(s, config.calibration, config.session); });
+    read(root, "calibration", "calibration", [&](Section& s) {
+        readCalibration(s, config.calibration, config.session, config.completion);
+    });
     read(root, "tracking", "tracking",
          [&](Section& s) { readTracking(s, config.tracking, config.maxModels); });
     read(root, "filter", "filter", [&](Section& s) { readFilter(s, config.filter); });

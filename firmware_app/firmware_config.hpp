@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/blob_detector.hpp"
+#include "core/calibration_completion.hpp"
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/pose_filter.hpp"
@@ -70,11 +71,15 @@ struct CalibrationSessionSettings {
     /// Never ends on its own before this.
     double minDuration_s = 10.0;
     /// Ends when the learnt models (objects and markers) have not changed for this long.
-    double settle_s = 8.0;
+    double settle_s = 5.0;
     /// Ends at the latest after this.
     double maxDuration_s = 120.0;
     /// The growing models are sent to the host (DTrack `3d` lines) this often.
     double previewRate_hz = 10.0;
+    /// The session keeps every frame for the completion stage: max_duration_s of frames at the
+    /// camera rate, with room for this many points a frame on average (24 bytes each; 120 s at
+    /// 100 Hz and 32 points are 9.2 MB). A session whose buffer fills ends there.
+    std::size_t bufferPointsPerFrame = 32;
 
     bool operator==(const CalibrationSessionSettings&) const = default;
 };
@@ -130,6 +135,9 @@ struct FirmwareConfig {
     StereoConfig stereo{};
     CalibrationConfig calibration{};
     CalibrationSessionSettings session{};
+    /// The completion stage at the end of a session; its capacities and S_min follow
+    /// [calibration] (max_objects, max_markers_per_object, min_model_markers, smin_*).
+    CompletionConfig completion{};
     ModelTrackingConfig tracking{};
     /// Models kept and tracked at once.
     std::size_t maxModels = 16;

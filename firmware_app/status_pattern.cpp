@@ -22,6 +22,8 @@ bool ledLevel(LedPattern pattern, hal::Nanoseconds since) {
         return square(since, 2000 * kMs, 100 * kMs);
     case LedPattern::Blink:
         return square(since, 500 * kMs, 250 * kMs);
+    case LedPattern::Finishing:
+        return !square(since, 1000 * kMs, 250 * kMs);
     case LedPattern::FastBlink:
         return square(since, 125 * kMs, 62 * kMs);
     case LedPattern::Confirm: {

@@ -13,6 +13,9 @@ enum class LedPattern {
     Heartbeat,
     /// Calibrating: 2 Hz, half on.
     Blink,
+    /// Finishing a calibration (its models are being completed and saved): on, dark for 250 ms
+    /// every second.
+    Finishing,
     /// Degraded (a camera or the flash failed): 8 Hz.
     FastBlink,
     /// Acknowledges a long press (models deleted): three double flashes in 1.5 s, then the

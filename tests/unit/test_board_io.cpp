@@ -82,6 +82,8 @@ TEST(StatusPattern, EachStateLooksDifferent) {
     EXPECT_EQ(risingEdges(LedPattern::Blink, fourSeconds), 8);
     EXPECT_NEAR(dutyCycle(LedPattern::Blink, fourSeconds), 0.5, 0.01);
     EXPECT_EQ(risingEdges(LedPattern::FastBlink, fourSeconds), 32);
+    EXPECT_EQ(risingEdges(LedPattern::Finishing, fourSeconds), 4);
+    EXPECT_NEAR(dutyCycle(LedPattern::Finishing, fourSeconds), 0.75, 0.01) << "mostly on";
     EXPECT_EQ(risingEdges(LedPattern::Confirm, fourSeconds), 6) << "three double flashes";
     EXPECT_FALSE(ledLevel(LedPattern::Confirm, patternDuration(LedPattern::Confirm)));
     EXPECT_EQ(patternDuration(LedPattern::Blink), 0);
