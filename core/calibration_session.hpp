@@ -1,4 +1,4 @@
-// One object-calibration session: the online stage frame by frame, every frame kept, completion at the end.
+// One object-calibration session: online stage per frame, every frame kept, completion at the end.
 #pragma once
 
 #include <cstddef>
@@ -30,9 +30,7 @@ public:
                        std::size_t maxFrames, std::size_t maxPoints);
 
     /// \brief False when a configuration or the room cannot work.
-    bool isValid() const {
-        return online_.isValid() && buffer_.isValid() && completion_.isValid();
-    }
+    bool isValid() const { return online_.isValid() && buffer_.isValid() && completion_.isValid(); }
 
     /// \brief Forget everything (a new session).
     void reset();
