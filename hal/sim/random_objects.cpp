@@ -277,8 +277,10 @@ MarkerObject makeRandomObject(ObjectFamily family, int markerCount, std::uint64_
     }
     o.name = std::string(familyName(family)) + std::to_string(o.markers.size());
     o.markerDiameter_mm = random.uniform(5.0, 8.0);
-    // Visible within a cone of 60 to 120 degrees about the normal.
-    o.minFacingCosine = std::cos(random.uniform(30.0, 60.0) * kPi / 180.0);
+    // Visible within a cone of 90 to 150 degrees about the normal: flat retroreflective foil on
+    // a curved face to half-sphere markers. (Narrower cones left a third of the objects never
+    // showing four markers at once: nothing a user could train, and nothing a test learns from.)
+    o.minFacingCosine = std::cos(random.uniform(45.0, 75.0) * kPi / 180.0);
     return o;
 }
 

@@ -28,7 +28,7 @@ std::span<const ObjectFamily> allFamilies();
  * \brief A random rigid object of \a family with about \a markerCount markers (4 to 40).
  *
  * Markers stand at least 12 mm apart (so that their blobs separate at the working distance) and
- * are seen within a cone of 60 to 120 degrees about their normals; size, proportions and layout
+ * are seen within a cone of 90 to 150 degrees about their normals; size, proportions and layout
  * come from \a seed. When the shape has no room for \a markerCount markers it carries fewer, never
  * fewer than four.
  */
