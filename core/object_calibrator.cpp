@@ -536,7 +536,7 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
     for (std::size_t c = 0; c < clusters.size(); ++c) {
         if (c == kept)
             continue;
-        Object* part = newObject();
+        Object* part = newObject(&objects_[objectIndex]);
         if (part == nullptr) {
             ++counters_.objectOverflow;
             continue;
@@ -1255,7 +1255,34 @@ void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& i
 
 // --- Storage. -----------------------------------------------------------------------------------
 
-ObjectCalibrator::Object* ObjectCalibrator::newObject() {
+ObjectCalibrator::Object* ObjectCalibrator::newObject(const Object* keep) {
+    // With every slot taken, the object least worth keeping makes room: one out of view that
+    // never established a marker (it would give no model), with the least evidence (its members'
+    // reliable frames), out of view the longest. Without this, reflections and glimpses that
+    // pass by fill the slots for good and an object that comes into view later is never learnt.
+    if (std::all_of(objects_.begin(), objects_.end(), [](const Object& o) { return o.active; })) {
+        Object* victim = nullptr;
+        std::uint64_t victimEvidence = 0;
+        for (Object& o : objects_) {
+            if (&o == keep || o.posed ||
+                std::any_of(o.members.begin(), o.members.end(),
+                            [&](const Member& m) { return established(m); }))
+                continue;
+            std::uint64_t evidence = 0;
+            for (const Member& m : o.members)
+                evidence += m.framesReliable;
+            if (victim == nullptr || evidence < victimEvidence ||
+                (evidence == victimEvidence && o.lostAtFrame < victim->lostAtFrame)) {
+                victim = &o;
+                victimEvidence = evidence;
+            }
+        }
+        if (victim != nullptr) {
+            deactivate(*victim);
+            ++counters_.objectsEvicted;
+            structureChanged_ = true;
+        }
+    }
     for (Object& o : objects_) {
         if (o.active)
             continue;

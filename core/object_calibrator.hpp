@@ -80,6 +80,8 @@ struct CalibrationCounters {
     std::uint64_t markerOverflow = 0;
     std::uint64_t objectOverflow = 0;
     std::uint64_t memberOverflow = 0;
+    /// Objects that gave up their slot to a new one: out of view, with no established marker.
+    std::uint64_t objectsEvicted = 0;
 };
 
 /// \brief Progress of one object for a display: its size now.
@@ -348,7 +350,9 @@ private:
     void merge(Object& from, Object& into, const RigidTransform& intoFromFrom,
                Members carry = Members::Any);
 
-    Object* newObject();
+    /// A free object slot; when none is free, the slot of the object least worth keeping (see
+    /// the definition), never \a keep's.
+    Object* newObject(const Object* keep = nullptr);
     void deactivate(Object& o);
     bool addMember(Object& o, std::size_t marker, const Vec3& model_mm);
     void removeMember(Object& o, std::size_t member);

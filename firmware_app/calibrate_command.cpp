@@ -18,8 +18,8 @@ void printProgress(std::ostream& progress, std::size_t frame, double time_s,
                    const ObjectCalibrator& calibrator, std::vector<CalibrationObjectView>& views) {
     const std::size_t count = calibrator.objectViews(views);
     char line[160];
-    std::snprintf(line, sizeof line, "\rcalibrate: frame %zu (%.1f s), %zu objects:", frame,
-                  time_s, count);
+    std::snprintf(line, sizeof line, "\rcalibrate: frame %zu (%.1f s), %zu objects:", frame, time_s,
+                  count);
     progress << line;
     for (std::size_t i = 0; i < count && i < 8; ++i)
         progress << ' ' << views[i].established << '/' << views[i].markers;
@@ -91,10 +91,11 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << ", invalid " << c.invalidRemoved << "; objects split " << c.splits << ", collapsed "
             << c.collapsed << ", found again " << c.refound << "; refused: markers "
             << c.markerOverflow << ", objects " << c.objectOverflow << ", markers in an object "
-            << c.memberOverflow << ", clustering deferred " << c.clusteringDeferred << "\n";
+            << c.memberOverflow << ", clustering deferred " << c.clusteringDeferred
+            << "; objects evicted " << c.objectsEvicted << "\n";
     const CompletionCounters& k = session.completionCounters();
-    summary << "  completion: " << session.seedsUsed() << " online models in, " << k.rounds << " rounds; "
-            << k.joinedByMotion + k.joinedByLayout << " pieces joined, " << k.dropped
+    summary << "  completion: " << session.seedsUsed() << " online models in, " << k.rounds
+            << " rounds; " << k.joinedByMotion + k.joinedByLayout << " pieces joined, " << k.dropped
             << " dropped; markers added " << k.markersAdded << ", removed " << k.markersRemoved
             << "; refused: places " << k.siteOverflow << ", models " << k.modelOverflow
             << ", markers " << k.markerOverflow << "\n";
