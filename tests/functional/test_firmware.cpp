@@ -149,16 +149,23 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
     const std::uint64_t overBudget = firmware.counters().framesOverBudget;
     const auto finishStart = std::chrono::steady_clock::now();
     std::size_t framesWhileFinishing = 0;
+    double longestFrame_us = 0.0;
     while (firmware.state() == FirmwareState::Finishing) {
         firmware.step();
         ++framesWhileFinishing;
+        longestFrame_us = std::max(longestFrame_us, firmware.stageTime(Stage::Frame).last_us);
         ASSERT_LT(std::chrono::steady_clock::now() - finishStart, std::chrono::seconds(120));
     }
-    std::cout << "[          ] " << framesWhileFinishing << " frames processed while finishing\n";
+    std::cout << "[          ] " << framesWhileFinishing << " frames processed while finishing, "
+              << firmware.counters().framesOverBudget - overBudget
+              << " over budget, the longest " << longestFrame_us * 1e-3 << " ms\n";
     EXPECT_GT(framesWhileFinishing, 0u);
 #ifndef EDGETRACK_SLOW_TARGET
-    EXPECT_EQ(firmware.counters().framesOverBudget, overBudget)
-        << "a frame over budget while the calibration finished";
+    // Completion in the frame loop would make one frame of several hundred ms; another process
+    // of a parallel test run may still preempt a frame now and then.
+    EXPECT_LE(firmware.counters().framesOverBudget - overBudget, framesWhileFinishing / 100)
+        << "frames over budget while the calibration finished";
+    EXPECT_LT(longestFrame_us, 100'000.0);
 #endif
     for (const ParsedDtrack& frame : receiver.drain())
         previewMarkers = std::max(previewMarkers, frame.markers.size());
