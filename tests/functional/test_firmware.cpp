@@ -157,8 +157,8 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
         ASSERT_LT(std::chrono::steady_clock::now() - finishStart, std::chrono::seconds(120));
     }
     std::cout << "[          ] " << framesWhileFinishing << " frames processed while finishing, "
-              << firmware.counters().framesOverBudget - overBudget
-              << " over budget, the longest " << longestFrame_us * 1e-3 << " ms\n";
+              << firmware.counters().framesOverBudget - overBudget << " over budget, the longest "
+              << longestFrame_us * 1e-3 << " ms\n";
     EXPECT_GT(framesWhileFinishing, 0u);
 #ifndef EDGETRACK_SLOW_TARGET
     // Completion in the frame loop would make one frame of several hundred ms; another process
