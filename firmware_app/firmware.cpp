@@ -151,6 +151,10 @@ void Firmware::start() {
     lastFrameAt_ = board_.clock.now();
 }
 
+Firmware::~Firmware() {
+    (void)finisher_.wait();
+}
+
 void Firmware::stop() {
     // A finishing calibration's models are saved before the board stops: never lost.
     waitForFinishing();

@@ -113,6 +113,10 @@ class Firmware {
 public:
     /// \param rig the stereo calibration of \a board's cameras.
     Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig);
+    /// Waits for a finishing calibration's worker, which uses the session and the model store.
+    ~Firmware();
+    Firmware(const Firmware&) = delete;
+    Firmware& operator=(const Firmware&) = delete;
 
     /// \return false when the configuration cannot run (see error()).
     bool isValid() const { return error_.empty(); }
