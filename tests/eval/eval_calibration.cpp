@@ -22,6 +22,7 @@
 #include <CLI/CLI.hpp>
 
 #include "core/calibration_completion.hpp"
+#include "core/calibration_session.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
 #include "core/session_buffer.hpp"
@@ -213,8 +214,9 @@ int main(int argc, char** argv) {
     }
     const sim::World world(std::move(*scene), seed);
     test::SimFrames simFrames(world, seed, level == "images");
-    ObjectCalibrator calibrator(config);
-    SessionBuffer session(static_cast<std::size_t>(frames), static_cast<std::size_t>(frames) * 256);
+    CalibrationSession learning(config, CompletionConfig{}, static_cast<std::size_t>(frames),
+                                static_cast<std::size_t>(frames) * 256);
+    const ObjectCalibrator& calibrator = learning.online();
     std::vector<MarkerModel> models;
     for (std::size_t i = 0; i < config.maxObjects; ++i)
         models.emplace_back(config.maxMarkersPerObject);
@@ -315,8 +317,7 @@ int main(int argc, char** argv) {
 
     for (std::int64_t f = 0; f < frames; ++f) {
         simFrames.next(static_cast<std::uint64_t>(f), observation, points);
-        calibrator.update(observation.time_s, points);
-        session.append(observation.time_s, points);
+        learning.update(observation.time_s, points);
         if (trace) {
             // The true marker each calibration marker was seen as: first and last label, frames.
             calibrator.forEachMember([&](const ObjectCalibrator::MemberView& v) {
@@ -423,17 +424,12 @@ int main(int argc, char** argv) {
     CompletionCounters completionCounters;
     double completion_s = 0.0;
     if (!onlineOnly) {
-        std::vector<MarkerModel> seeds;
-        for (std::size_t i = 0; i < count; ++i) {
-            seeds.emplace_back(config.maxMarkersPerObject);
-            seeds.back().assign(models[i]);
-        }
         const auto start = std::chrono::steady_clock::now();
-        CalibrationCompletion completion{CompletionConfig{}};
-        count = completion.run(session, seeds, models);
+        models = learning.complete();
+        count = models.size();
         completion_s =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        completionCounters = completion.counters();
+        completionCounters = learning.completionCounters();
     }
     const Report final = evaluate(std::span(models).first(count), layouts, expected);
     double completeAt = -1.0;
