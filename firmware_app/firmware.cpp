@@ -237,7 +237,7 @@ void Firmware::startCalibration() {
     calibration_.reset();
     calibrationStart_s_ = hal::toSeconds(board_.clock.now());
     calibrationChanged_s_ = calibrationStart_s_;
-    calibrationSignature_ = 0;
+    learntSoFar_ = {};
     lastPreview_s_ = -1e9;
     state_ = FirmwareState::Calibrating;
     ++counters_.calibrationsStarted;
@@ -252,35 +252,35 @@ void Firmware::calibrationStep(double time_s) {
     }
     // The session settles when the objects that would be exported, and their markers, stop
     // changing.
-    const std::size_t views = calibration_.online().objectViews(objectViews_);
-    std::size_t objects = 0;
-    std::size_t markers = 0;
-    for (std::size_t i = 0; i < views; ++i)
-        if (objectViews_[i].established >= config_.calibration.minModelMarkers) {
-            ++objects;
-            markers += objectViews_[i].established;
-        }
-    const std::size_t signature = objects * 1'000'000 + markers;
-    if (signature != calibrationSignature_) {
-        calibrationSignature_ = signature;
+    const LearntSoFar learnt = learntSoFar();
+    if (learnt != learntSoFar_) {
+        learntSoFar_ = learnt;
         calibrationChanged_s_ = time_s;
     }
     const double elapsed = time_s - calibrationStart_s_;
     if (elapsed >= config_.session.maxDuration_s)
         finishCalibration("its time limit");
-    else if (objects > 0 && elapsed >= config_.session.minDuration_s &&
+    else if (learnt.objects > 0 && elapsed >= config_.session.minDuration_s &&
              time_s - calibrationChanged_s_ >= config_.session.settle_s)
         finishCalibration("the models settled");
+}
+
+Firmware::LearntSoFar Firmware::learntSoFar() {
+    LearntSoFar learnt;
+    const std::size_t views = calibration_.online().objectViews(objectViews_);
+    for (std::size_t i = 0; i < views; ++i)
+        if (objectViews_[i].established >= config_.calibration.minModelMarkers) {
+            ++learnt.objects;
+            learnt.markers += objectViews_[i].established;
+        }
+    return learnt;
 }
 
 void Firmware::finishCalibration(const char* why) {
     char lasted[32];
     std::snprintf(lasted, sizeof lasted, " after %.1f s", frameTime_s_ - calibrationStart_s_);
     finishingEvent_ = std::string("calibration ended by ") + why + lasted;
-    std::size_t objects = 0;
-    const std::size_t views = calibration_.online().objectViews(objectViews_);
-    for (std::size_t i = 0; i < views; ++i)
-        objects += objectViews_[i].established >= config_.calibration.minModelMarkers ? 1u : 0u;
+    const std::size_t objects = learntSoFar().objects;
     if (objects == 0) {
         state_ = FirmwareState::Tracking;
         ++counters_.calibrationsEmpty;

@@ -163,6 +163,14 @@ private:
     void handleButton(hal::Nanoseconds now);
     void startCalibration();
     void finishCalibration(const char* why);
+    /// What the running session would export now; it has settled when this stops changing.
+    struct LearntSoFar {
+        std::size_t objects = 0;
+        std::size_t markers = 0;
+        bool operator==(const LearntSoFar&) const = default;
+    };
+    /// The online objects with at least min_model_markers established markers, and those markers.
+    LearntSoFar learntSoFar();
     void takeFinishedCalibration(FinishedCalibration finished);
     /// Tracking or Finishing: the known models are tracked and sent.
     bool tracksModels() const {
@@ -247,7 +255,7 @@ private:
     double calibrationStart_s_ = 0.0;
     double calibrationChanged_s_ = 0.0;
     double lastPreview_s_ = -1e9;
-    std::size_t calibrationSignature_ = 0;
+    LearntSoFar learntSoFar_;
     double frameTime_s_ = 0.0;
 
     FirmwareCounters counters_{};
