@@ -33,7 +33,6 @@ constexpr std::uint64_t kContinuousFrames = 2;
 /// Markers in one calibration preview (`3d` line); the datagram buffer holds them.
 constexpr std::size_t kMaxPreviewMarkers = 128;
 constexpr std::size_t kDatagramBytes = 8192;
-constexpr hal::Nanoseconds kDay = 86400 * hal::kNanosecondsPerSecond;
 
 /// The completion stage as the board runs it: the calibration's own capacities and S_min, markers
 /// seen from between the two cameras.
@@ -521,17 +520,22 @@ void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acqui
 
 void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
     dtrackBodies_.clear();
-    dtrackMarkers_.clear();
     if (tracksModels()) {
         const std::span<const TrackedBody> tracked = tracker_->bodies();
         for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
             if (tracked[b].found())
                 dtrackBodies_.push_back({tracked[b].modelId, 1.0, outputPoses_[b]});
-    } else if (state_ == FirmwareState::Calibrating && config_.session.previewRate_hz > 0.0 &&
+    }
+    if (state_ != FirmwareState::Calibrating) {
+        // Every frame carries its `3d` line: `3d 0` clears a client's preview markers.
+        dtrackMarkers_.clear();
+    } else if (config_.session.previewRate_hz > 0.0 &&
                frameTime_s_ - lastPreview_s_ >= 1.0 / config_.session.previewRate_hz) {
         lastPreview_s_ = frameTime_s_;
+        dtrackMarkers_.clear();
         // The growing models where they are now: established members, id = object * 1000 +
-        // marker, so a viewer can colour them by object.
+        // marker, so a viewer can colour them by object. Refreshed at the preview rate and
+        // repeated in the frames between.
         calibration_.online().forEachMember([&](const ObjectCalibrator::MemberView& m) {
             if (m.established && dtrackMarkers_.size() < kMaxPreviewMarkers)
                 dtrackMarkers_.push_back(
@@ -540,8 +544,7 @@ void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
     }
     DtrackFrame out;
     out.frame = frame.number;
-    const hal::Nanoseconds utc = frame.midExposure() + board_.clock.utcOffset();
-    out.timestamp_s = hal::toSeconds(((utc % kDay) + kDay) % kDay);
+    out.midExposureUtc_ns = frame.midExposure() + board_.clock.utcOffset();
     out.calibrated = static_cast<std::uint32_t>(models_.size());
     out.bodies = dtrackBodies_;
     out.markers = dtrackMarkers_;

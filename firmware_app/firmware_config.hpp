@@ -88,7 +88,8 @@ struct CalibrationSessionSettings {
 struct UdpSettings {
     bool enabled = true;
     std::vector<hal::UdpEndpoint> destinations{hal::UdpEndpoint{{127, 0, 0, 1}, 5000}};
-    /// Each frame carries `etlat SECONDS`, the latency from mid-exposure to sending.
+    /// Each frame carries DTrack's `ts2 SECONDS MICROSECONDS LATENCY_US` line: the mid-exposure
+    /// as UTC and the latency from mid-exposure to sending, where DTrackSDK reads it.
     bool latencyLine = true;
 
     bool operator==(const UdpSettings&) const = default;

@@ -1,6 +1,7 @@
 // DTrack ASCII frames: a fixed-buffer writer for the frame loop and a strict reader for tests.
 #include "firmware_app/output/dtrack.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdarg>
@@ -45,8 +46,20 @@ private:
 
 std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out) {
     Appender a(out);
+    constexpr std::int64_t kNanosPerSecond = 1'000'000'000;
+    constexpr std::int64_t kNanosPerDay = 86'400 * kNanosPerSecond;
+    const std::int64_t sinceMidnight_ns =
+        ((frame.midExposureUtc_ns % kNanosPerDay) + kNanosPerDay) % kNanosPerDay;
     a.print("fr %llu\r\n", static_cast<unsigned long long>(frame.frame));
-    a.print("ts %.6f\r\n", frame.timestamp_s);
+    a.print("ts %.6f\r\n", static_cast<double>(sinceMidnight_ns) * 1e-9);
+    if (frame.latency_s) {
+        // Whole microseconds, rounded down, so that seconds and microseconds stay one instant.
+        const std::int64_t utc_us = frame.midExposureUtc_ns / 1000;
+        const double latency_us = std::clamp(*frame.latency_s * 1e6, 0.0, 4294967295.0);
+        a.print("ts2 %lld %lld %lu\r\n", static_cast<long long>(utc_us / 1'000'000),
+                static_cast<long long>(utc_us % 1'000'000),
+                static_cast<unsigned long>(std::lround(latency_us)));
+    }
     a.print("6dcal %u\r\n", frame.calibrated);
     a.print("6d %zu", frame.bodies.size());
     for (const DtrackBody& body : frame.bodies) {
@@ -58,15 +71,11 @@ std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out) {
                 r(0, 1), r(1, 1), r(2, 1), r(0, 2), r(1, 2), r(2, 2));
     }
     a.print("\r\n");
-    if (!frame.markers.empty()) {
-        a.print("3d %zu", frame.markers.size());
-        for (const DtrackMarker& m : frame.markers)
-            a.print(" [%u %.3f][%.3f %.3f %.3f]", m.id, m.quality, m.position_mm.x(),
-                    m.position_mm.y(), m.position_mm.z());
-        a.print("\r\n");
-    }
-    if (frame.latency_s)
-        a.print("etlat %.6f\r\n", *frame.latency_s);
+    a.print("3d %zu", frame.markers.size());
+    for (const DtrackMarker& m : frame.markers)
+        a.print(" [%u %.3f][%.3f %.3f %.3f]", m.id, m.quality, m.position_mm.x(), m.position_mm.y(),
+                m.position_mm.z());
+    a.print("\r\n");
     return a.length();
 }
 
@@ -122,6 +131,7 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
             }
         } else if (line.rfind("3d ", 0) == 0) {
             c += 3;
+            parsed.hasMarkerLine = true;
             double count = 0.0;
             if (!number(count))
                 return Error{"dtrack: 3d without a count"};
@@ -133,8 +143,22 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
                 parsed.markers.push_back(
                     {static_cast<std::uint32_t>(v[0]), v[1], Vec3(v[2], v[3], v[4])});
             }
-        } else if (line.rfind("etlat ", 0) == 0) {
-            parsed.latency_s = std::strtod(c + 6, nullptr);
+        } else if (line.rfind("ts2 ", 0) == 0) {
+            // Three unsigned integers, as DTrackSDK reads them.
+            c += 4;
+            std::array<unsigned long long, 3> v{};
+            for (unsigned long long& x : v) {
+                while (*c == ' ')
+                    ++c;
+                if (*c < '0' || *c > '9')
+                    return Error{"dtrack: ts2 needs seconds, microseconds and latency"};
+                x = std::strtoull(c, &next, 10);
+                c = next;
+            }
+            if (v[1] >= 1'000'000 || v[2] > 0xFFFFFFFFull)
+                return Error{"dtrack: ts2 is out of range"};
+            parsed.ts2 =
+                DtrackTs2{v[0], static_cast<std::uint32_t>(v[1]), static_cast<std::uint32_t>(v[2])};
         }
     }
     if (!haveFrame)

@@ -34,23 +34,34 @@ struct DtrackMarker {
 /// \brief Everything one DTrack datagram says.
 struct DtrackFrame {
     std::uint64_t frame = 0;
-    /// Seconds since UTC midnight, at mid-exposure.
-    double timestamp_s = 0.0;
+    /// Mid-exposure, UTC (ns since 1970-01-01). `ts` says it in seconds since UTC midnight,
+    /// `ts2` in whole seconds and microseconds since 1970.
+    std::int64_t midExposureUtc_ns = 0;
     /// Number of calibrated bodies (`6dcal`).
     std::uint32_t calibrated = 0;
     std::span<const DtrackBody> bodies;
-    /// Single markers (`3d` line), left out when empty.
+    /// Single markers: the `3d` line, sent in every frame (`3d 0` when empty), because DTrack
+    /// clients replace their marker list only when a `3d` line arrives.
     std::span<const DtrackMarker> markers;
-    /// Mid-exposure to send (s); written as the extension line `etlat` when set. DTrack clients
-    /// skip labels they do not know (DTrackSDK, VRPN's driver), so the frame stays readable.
+    /// Mid-exposure to send (s): the third field of the `ts2` line (in microseconds), where
+    /// DTrackSDK reads the latency; no `ts2` line when unset.
     std::optional<double> latency_s;
+};
+
+/// \brief A `ts2` line: DTrack's timestamp with the latency beside it.
+struct DtrackTs2 {
+    /// Mid-exposure, UTC: whole seconds since 1970-01-01 and the microseconds after them.
+    std::uint64_t seconds = 0;
+    std::uint32_t microseconds = 0;
+    /// Mid-exposure to send (us).
+    std::uint32_t latency_us = 0;
 };
 
 /**
  * \brief Write \a frame as one DTrack ASCII datagram into \a out, CRLF line ends:
- * `fr`, `ts`, `6dcal`, and `6d N [id q][x y z][r0 ... r8]` with the rotation column-wise and
- * positions in mm (`6d 0` when no body is found); then `3d N [id q][x y z]` when there are
- * markers and `etlat SECONDS` when the latency is set.
+ * `fr`, `ts` (seconds since UTC midnight), `ts2 SECONDS MICROSECONDS LATENCY_US` when the latency
+ * is set, `6dcal`, `6d N [id q][x y z][r0 ... r8]` with the rotation column-wise and positions in
+ * mm (`6d 0` when no body is found), and `3d N [id q][x y z]` (`3d 0` when there are no markers).
  * \return the datagram's length, or 0 when it does not fit \a out (nothing partial is sent).
  * Allocates nothing: it runs in the frame loop.
  */
@@ -62,12 +73,14 @@ struct ParsedDtrack {
     double timestamp_s = 0.0;
     std::uint32_t calibrated = 0;
     std::vector<DtrackBody> bodies;
+    /// Whether the datagram had a `3d` line: a DTrack client keeps its previous markers if not.
+    bool hasMarkerLine = false;
     std::vector<DtrackMarker> markers;
-    std::optional<double> latency_s;
+    std::optional<DtrackTs2> ts2;
 };
 
-/// \brief Parse a datagram as a DTrack client does: the lines above, CRLF ends, unknown lines
-/// skipped; a rotation that is not orthonormal (to 1e-4) is an error.
+/// \brief Parse a datagram as DTrackSDK does: the lines above, CRLF ends, unknown lines skipped;
+/// a rotation that is not orthonormal (to 1e-4) is an error.
 Result<ParsedDtrack> parseDtrack(std::string_view datagram);
 
 } // namespace edgetrack::app
