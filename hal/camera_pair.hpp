@@ -32,7 +32,10 @@ struct CameraFrame {
  */
 struct StereoFrame {
     std::array<CameraFrame, 2> camera{};
-    /// Counts paired exposures since start(); gaps mean frames were dropped.
+    /// The exposure's number: one more for each exposure, so a gap means exposures were dropped
+    /// or left unpaired. The simulated board numbers them as `edgetrack sim` numbers a
+    /// recording's frames (frame k shows the scene at k / rate); libcamera's pair counts camera
+    /// 0's sensor sequence from its first pair, continuing across restarts.
     std::uint64_t number = 0;
     /// Backend's buffer slot, for release().
     int slot = -1;

@@ -163,7 +163,7 @@ Status LibcameraCameraPair::start() {
         std::lock_guard lock(mutex_);
         streaming_ = true;
         failed_ = false;
-        pairNumber_ = 0;
+        sequenceToNumber_.reset();
         for (Side& side : sides_)
             side.lastCompletion = clock_.now();
     }
@@ -468,7 +468,15 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
     ++counters_.delivered;
     if (sides_[0].path == PixelPath::ConvertRgb || sides_[1].path == PixelPath::ConvertRgb)
         ++libcameraCounters_.converted;
-    frame.number = pairNumber_++;
+    // Numbered by camera 0's sensor sequence: an exposure that was dropped or left unpaired
+    // leaves a gap, as the HAL promises. The first pair after start(), or a sequence that went
+    // back, continues from the next number, so numbers only grow.
+    const auto sequence = static_cast<std::int64_t>(pair[0].frame.sequence);
+    const auto next = static_cast<std::int64_t>(nextNumber_);
+    if (!sequenceToNumber_ || sequence + *sequenceToNumber_ < next)
+        sequenceToNumber_ = next - sequence;
+    frame.number = static_cast<std::uint64_t>(sequence + *sequenceToNumber_);
+    nextNumber_ = frame.number + 1;
     frame.slot = slotIndex;
     lock.unlock();
 

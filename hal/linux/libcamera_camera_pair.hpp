@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -191,7 +192,9 @@ private:
     std::condition_variable frameArrived_;
     bool streaming_ = false;
     bool failed_ = false;
-    std::uint64_t pairNumber_ = 0;
+    /// Frame number minus camera 0's sequence number (unset until the first pair after start()).
+    std::optional<std::int64_t> sequenceToNumber_;
+    std::uint64_t nextNumber_ = 0;
     hal::CameraPairCounters counters_{};
     LibcameraPairCounters libcameraCounters_{};
 };

@@ -100,7 +100,9 @@ hal::AcquireStatus SimCameraPair::acquire(hal::StereoFrame& frame, Nanoseconds t
         addSpuriousBurst(index);
         const auto s = static_cast<std::size_t>(slot);
         held_[s] = true;
-        frame.number = delivered_++;
+        // The exposure's index, as in `edgetrack sim`'s recordings: frame k of both shows the
+        // scene at k / rate, and a dropped exposure leaves a gap.
+        frame.number = index;
         frame.slot = slot;
         for (int camera = 0; camera < 2; ++camera) {
             const auto c = static_cast<std::size_t>(camera);

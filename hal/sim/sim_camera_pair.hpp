@@ -70,7 +70,6 @@ private:
     Observation observation_;
     hal::CameraPairCounters counters_{};
     std::uint64_t nextIndex_ = 0;
-    std::uint64_t delivered_ = 0;
     std::uint64_t dropPartnerEvery_ = 0;
     int spuriousBurst_ = 0;
     bool started_ = false;

@@ -19,7 +19,11 @@ TEST(SimCameraPair, DeliversPairedFramesAtTheFrameRate) {
     for (int i = 0; i < 5; ++i) {
         ASSERT_EQ(board.cameras.acquire(frame, hal::kNanosecondsPerSecond),
                   hal::AcquireStatus::Frame);
-        EXPECT_EQ(frame.number, static_cast<std::uint64_t>(i));
+        // Numbered by exposure as `edgetrack sim` numbers frames: frame k is the scene at
+        // k / rate, and the first exposure after start at time 0 is frame 1.
+        EXPECT_EQ(frame.number, static_cast<std::uint64_t>(i + 1));
+        EXPECT_EQ(frame.midExposure(), static_cast<Nanoseconds>(frame.number) * 10'000'000 +
+                                           SimCameraPair::kSyncSkew / 2);
         EXPECT_EQ(frame.camera[0].width_px, 1280);
         EXPECT_EQ(frame.camera[1].exposureStart - frame.camera[0].exposureStart,
                   SimCameraPair::kSyncSkew);
