@@ -333,6 +333,128 @@ TEST(FirmwareOnSimBoard, WhileACalibrationFinishesTheLoopGoesOnAndPressesWaitFor
     EXPECT_EQ(restarted.models().size(), 0u) << "the deletion reached flash after the save";
 }
 
+/// What a DTrack client built on DTrackSDK shows after each datagram: bodies are replaced by every
+/// `6d` line, markers only when a `3d` line arrives, and the latency is that frame's `ts2`.
+struct DtrackSdkView {
+    std::vector<DtrackMarker> markers;
+    std::optional<std::uint32_t> latency_us;
+
+    void receive(const ParsedDtrack& frame) {
+        if (frame.hasMarkerLine)
+            markers = frame.markers;
+        latency_us.reset();
+        if (frame.ts2)
+            latency_us = frame.ts2->latency_us;
+    }
+};
+
+/// Every datagram the simulated board's UDP sent since the last call, parsed.
+std::vector<ParsedDtrack> takeDtrack(sim::SimBoard& board) {
+    std::vector<ParsedDtrack> frames;
+    sim::SimUdpSender::Datagram datagram;
+    while (board.udp.takeSent(datagram)) {
+        Result<ParsedDtrack> parsed = parseDtrack(datagram.text());
+        EXPECT_TRUE(parsed) << parsed.error().message;
+        if (parsed)
+            frames.push_back(std::move(*parsed));
+    }
+    return frames;
+}
+
+// Issue 25: DTrackSDK and VRPN keep their markers until a `3d` line replaces them, so every frame
+// carries one; the latency goes where DTrackSDK reads it.
+TEST(FirmwareOnSimBoard, AfterACalibrationADtrackClientShowsNoMarkersAndReadsTheLatency) {
+    auto sim = makeBoard("two_cubes", 3);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    runFrames(firmware, 20);
+    DtrackSdkView client;
+    std::size_t datagrams = 0;
+    std::size_t withLatency = 0;
+    std::size_t previewFrames = 0;
+    std::size_t markersAfterTheSession = 0;
+    bool sessionBegun = false;
+    bool sessionOver = false;
+    auto stepAndReceive = [&] {
+        firmware.step();
+        const bool calibrating = firmware.state() == FirmwareState::Calibrating;
+        sessionOver = sessionOver || (sessionBegun && !calibrating);
+        sessionBegun = sessionBegun || calibrating;
+        for (const ParsedDtrack& frame : takeDtrack(*sim)) {
+            client.receive(frame);
+            ++datagrams;
+            if (client.latency_us && *client.latency_us > 0u && *client.latency_us < 50'000u)
+                ++withLatency;
+            if (!sessionOver)
+                previewFrames += client.markers.empty() ? 0u : 1u;
+            else
+                markersAfterTheSession += client.markers.size();
+        }
+    };
+    sim->button.press(sim->clock.now(), 100 * kMs);
+    while (firmware.state() != FirmwareState::Calibrating)
+        stepAndReceive();
+    for (int f = 0; f < 600; ++f)
+        stepAndReceive();
+    ASSERT_EQ(firmware.state(), FirmwareState::Calibrating);
+    EXPECT_GT(previewFrames, 300u) << "the preview shows the growing models in most frames";
+    sim->button.press(sim->clock.now(), 100 * kMs);
+    const auto begin = std::chrono::steady_clock::now();
+    while (firmware.state() != FirmwareState::Tracking) {
+        stepAndReceive();
+        ASSERT_LT(std::chrono::steady_clock::now() - begin, std::chrono::seconds(120));
+    }
+    for (int f = 0; f < 200; ++f)
+        stepAndReceive();
+    EXPECT_TRUE(sessionOver);
+    EXPECT_EQ(markersAfterTheSession, 0u) << "markers shown after the calibration ended";
+    EXPECT_EQ(withLatency, datagrams) << "a frame without its latency";
+    EXPECT_GT(datagrams, 800u);
+}
+
+// Issue 25: frame N of `run --board sim` is frame N of `edgetrack sim` with the same scene and
+// seed, which draws frame N as World::observe(N); its `ts` is that frame's mid-exposure.
+TEST(FirmwareOnSimBoard, FrameNumbersAreTheFramesOfASimRecording) {
+    constexpr std::uint64_t kSeed = 5;
+    auto sim = makeBoard("two_cubes", kSeed);
+    const sim::World recording(*sim::makeScene("two_cubes", kSeed), kSeed);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    runFrames(firmware, 300);
+    sim::Observation truth;
+    auto error_mm = [&](std::uint64_t frame, const DtrackBody& body) {
+        recording.observe(frame, truth);
+        return (truth.objectPoses[body.id].translation_mm - body.T_rig_from_model.translation_mm)
+            .norm();
+    };
+    std::size_t compared = 0;
+    std::size_t closestToItsOwnFrame = 0;
+    double worstTimeError_s = 0.0;
+    for (const ParsedDtrack& frame : takeDtrack(*sim)) {
+        ASSERT_TRUE(frame.ts2.has_value());
+        const double utc_s = static_cast<double>(frame.ts2->seconds) +
+                             1e-6 * static_cast<double>(frame.ts2->microseconds);
+        const double boardTime_s = utc_s - hal::toSeconds(sim->clock.utcOffset());
+        worstTimeError_s =
+            std::max(worstTimeError_s, std::abs(boardTime_s - recording.frameTime_s(frame.frame)));
+        if (frame.frame == 0)
+            continue;
+        for (const DtrackBody& body : frame.bodies) {
+            const double own = error_mm(frame.frame, body);
+            ++compared;
+            closestToItsOwnFrame +=
+                own < error_mm(frame.frame - 1, body) && own < error_mm(frame.frame + 1, body) ? 1u
+                                                                                               : 0u;
+        }
+    }
+    EXPECT_GT(compared, 300u);
+    EXPECT_GE(closestToItsOwnFrame, compared * 95 / 100)
+        << "poses nearer another frame's truth than their own";
+    // Camera 1 exposes 50 us after camera 0; the frame's time is between them.
+    EXPECT_LT(worstTimeError_s, 100e-6);
+}
+
 TEST(FirmwareOnSimBoard, ALongPressDeletesAllModelsWithAConfirmationPattern) {
     auto sim = makeBoard("two_cubes", 3);
     Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
