@@ -29,6 +29,7 @@ struct RunOptions {
     std::int64_t frames = 0;
     std::string udp;
     std::string can;
+    std::string canLog;
     std::string models;
 };
 
@@ -80,6 +81,8 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         ->check(CLI::NonNegativeNumber);
     runCommand->add_option("--udp", run.udp, "DTrack UDP destination HOST:PORT");
     runCommand->add_option("--can", run.can, "CAN interface for pose frames");
+    runCommand->add_option("--can-log", run.canLog,
+                           "Log the CAN frames sent to FILE (candump -L format); enables CAN");
     runCommand->add_option("--models", run.models, "Load models from this directory");
 
     SimOptions sim;
@@ -170,6 +173,7 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.frames = run.frames;
         options.udp = run.udp;
         options.can = run.can;
+        options.canLog = run.canLog;
         options.models = run.models;
         return runFirmwareCommand(options, out, err);
     }

@@ -14,6 +14,7 @@
 
 #include "firmware_app/firmware.hpp"
 #include "firmware_app/model_file.hpp"
+#include "firmware_app/output/can_log.hpp"
 #include "firmware_app/recording/recording.hpp"
 #include "hal/linux/linux_board.hpp"
 #include "hal/linux/posix_udp_sender.hpp"
@@ -138,6 +139,8 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         config.can.enabled = true;
         config.can.interface = options.can;
     }
+    if (!options.canLog.empty())
+        config.can.enabled = true;
     // The only place that picks a backend.
     std::unique_ptr<sim::SimBoard> sim;
     std::unique_ptr<linux_hal::PosixUdpSender> simUdp;
@@ -183,7 +186,22 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         rig = sim->world.rig();
         boardName = "simulated board, scene '" + sceneName + "'";
     }
-    hal::Board& board = linuxBoard ? linuxBoard->board() : *simBoardView;
+    hal::Board& backendBoard = linuxBoard ? linuxBoard->board() : *simBoardView;
+    // The CAN log sits between the firmware and the board's bus, so any board can log.
+    std::unique_ptr<CanLogBus> canLog;
+    std::optional<hal::Board> loggingBoard;
+    if (!options.canLog.empty()) {
+        canLog = std::make_unique<CanLogBus>(backendBoard.can, backendBoard.clock,
+                                             config.can.interface, options.canLog);
+        if (!canLog->isValid()) {
+            err << "edgetrack run: --can-log " << canLog->error() << "\n";
+            return 1;
+        }
+        loggingBoard.emplace(hal::Board{
+            backendBoard.clock, backendBoard.cameras, backendBoard.ledRing, backendBoard.button,
+            backendBoard.statusLed, backendBoard.flash, *canLog, backendBoard.udp});
+    }
+    hal::Board& board = loggingBoard ? *loggingBoard : backendBoard;
 
     Firmware firmware(config, board, rig);
     if (!firmware.isValid()) {
@@ -298,6 +316,14 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     if (terminal && statusPeriod > 0)
         err << "\n";
     out << firmware.statusReport();
+    if (canLog) {
+        canLog->flush();
+        out << "edgetrack run: " << canLog->framesLogged() << " CAN frames logged to "
+            << options.canLog.string() << " (candump -L)";
+        if (canLog->writeFailures() > 0)
+            out << ", " << canLog->writeFailures() << " writes failed";
+        out << "\n";
+    }
     if (linuxBoard)
         out << linuxBoard->report();
     if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {

@@ -18,6 +18,8 @@ struct RunCommandOptions {
     std::string udp;
     /// Enables CAN output on this interface.
     std::string can;
+    /// Enables CAN output and logs every frame sent to this file (`candump -L` format).
+    std::filesystem::path canLog;
     /// Model directory (INTERFACES §4) to track, saved to flash.
     std::filesystem::path models;
     std::uint64_t seed = 1;

@@ -162,6 +162,28 @@ hal::CanFrame encodeFdPose(const CanPose& pose, const CanPoseLayout& layout) {
     return frame;
 }
 
+namespace {
+
+/// \a value to 12 significant digits as a plain decimal ("0.0000610388817677", never
+/// "6.10388817677e-05"): some DBC readers take no exponent and drop the signal.
+std::string plainDecimal(double value) {
+    if (value == 0.0)
+        return "0";
+    const int magnitude = static_cast<int>(std::floor(std::log10(std::abs(value))));
+    const int decimals = std::max(0, 11 - magnitude);
+    char text[64];
+    std::snprintf(text, sizeof text, "%.*f", decimals, value);
+    std::string out(text);
+    if (out.find('.') != std::string::npos) {
+        out.erase(out.find_last_not_of('0') + 1);
+        if (out.back() == '.')
+            out.pop_back();
+    }
+    return out;
+}
+
+} // namespace
+
 std::string poseDbc(const CanPoseLayout& layout) {
     std::string out;
     char line[512];
@@ -191,10 +213,10 @@ std::string poseDbc(const CanPoseLayout& layout) {
                       p.message->length);
         add(line);
         for (const Signal& s : p.message->signals) {
-            std::snprintf(line, sizeof line,
-                          " SG_ %s : %u|%u@1%c (%.12g,0) [%.12g|%.12g] \"%s\" HOST\n", s.name,
-                          s.start, s.length, s.isSigned ? '-' : '+', s.factor, s.minimum, s.maximum,
-                          s.unit);
+            std::snprintf(line, sizeof line, " SG_ %s : %u|%u@1%c (%s,0) [%s|%s] \"%s\" HOST\n",
+                          s.name, s.start, s.length, s.isSigned ? '-' : '+',
+                          plainDecimal(s.factor).c_str(), plainDecimal(s.minimum).c_str(),
+                          plainDecimal(s.maximum).c_str(), s.unit);
             add(line);
         }
         add("\n");
