@@ -26,6 +26,12 @@ host_packages=(
 apt-get update -q
 apt_install "${host_packages[@]}"
 
+# Test only: an independent DBC decoder (the npm package candied) reads run --can-log's output.
+if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
+    apt_install nodejs npm
+fi
+(cd "$(dirname "$0")/../tests/functional/can_log_decode" && npm ci --no-audit --no-fund)
+
 want() {
     local word
     for word in "${requested[@]}"; do
