@@ -248,19 +248,10 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
 // ---------------------------------------------------------------------------------------------
 // Tracking every body through the session
 
-void CalibrationCompletion::trackAll(const SessionBuffer& session) {
-    const std::size_t frames = session.frames();
-    std::stable_sort(bodies_.begin(), bodies_.end(), [](const Body& a, const Body& b) {
-        if (a.alive != b.alive)
-            return a.alive;
-        return a.markers_mm.size() > b.markers_mm.size();
-    });
-    std::size_t alive = 0;
-    while (alive < bodies_.size() && bodies_[alive].alive)
-        ++alive;
+std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count) const {
     std::vector<MarkerModel> models;
-    models.reserve(alive);
-    for (std::size_t b = 0; b < alive; ++b) {
+    models.reserve(count);
+    for (std::size_t b = 0; b < count; ++b) {
         const Body& body = bodies_[b];
         MarkerModel& model = models.emplace_back(config_.maxMarkersPerModel);
         model.id = static_cast<std::uint32_t>(b);
@@ -277,10 +268,7 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             for (const auto& [i, j] : body.edges)
                 model.edges.push_back({i, j, (body.markers_mm[i] - body.markers_mm[j]).norm()});
         }
-        std::fill(bodies_[b].posed.begin(), bodies_[b].posed.end(), std::uint8_t{0});
     }
-    if (alive == 0)
-        return;
     // S_min as this tracker tells distances apart: a self-similar layout (a sphere) needs fewer
     // markers to be told from itself at the tracker's tolerance than at the export's safe one.
     SminConfig smin = config_.smin;
@@ -293,6 +281,24 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     for (MarkerModel& m : models)
         m.sMin =
             std::min<std::uint32_t>(m.sMin, static_cast<std::uint32_t>(config_.maxAcquireMarkers));
+    return models;
+}
+
+void CalibrationCompletion::trackAll(const SessionBuffer& session) {
+    const std::size_t frames = session.frames();
+    std::stable_sort(bodies_.begin(), bodies_.end(), [](const Body& a, const Body& b) {
+        if (a.alive != b.alive)
+            return a.alive;
+        return a.markers_mm.size() > b.markers_mm.size();
+    });
+    std::size_t alive = 0;
+    while (alive < bodies_.size() && bodies_[alive].alive)
+        ++alive;
+    for (std::size_t b = 0; b < alive; ++b)
+        std::fill(bodies_[b].posed.begin(), bodies_[b].posed.end(), std::uint8_t{0});
+    if (alive == 0)
+        return;
+    const std::vector<MarkerModel> models = trackingModels(alive);
 
     // Forwards, then backwards in time; each frame takes whichever pass matched more markers over
     // all bodies, as a whole, so that no point serves two bodies in one frame.
@@ -333,12 +339,59 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     counters_.framesTracked += 2 * frames;
 }
 
+void CalibrationCompletion::trackAlone(const SessionBuffer& session, std::size_t index) {
+    const std::size_t frames = session.frames();
+    Body& body = bodies_[index];
+    body.posedAlone.assign(frames, 0);
+    body.T_rig_from_body_alone.resize(frames);
+    // The body's model as the only one, id 0: the bodies before it are copied and left out.
+    std::vector<MarkerModel> models = trackingModels(index + 1);
+    MarkerModel alone = std::move(models.back());
+    alone.id = 0;
+    models.clear();
+    models.push_back(std::move(alone));
+    std::vector<std::uint32_t> forwardMarkers(frames, 0);
+    {
+        ModelTracker tracker(models, config_.tracking);
+        if (!tracker.isValid())
+            return;
+        for (std::size_t f = 0; f < frames; ++f) {
+            tracker.update(session.time_s(f), session.points(f));
+            const TrackedBody& tracked = tracker.bodies()[0];
+            if (!tracked.found())
+                continue;
+            body.posedAlone[f] = 1;
+            body.T_rig_from_body_alone[f] = tracked.T_rig_from_model;
+            forwardMarkers[f] = tracked.markers;
+        }
+    }
+    ModelTracker tracker(models, config_.tracking);
+    for (std::size_t step = 0; step < frames; ++step) {
+        const std::size_t f = frames - 1 - step;
+        tracker.update(-session.time_s(f), session.points(f));
+        const TrackedBody& tracked = tracker.bodies()[0];
+        if (!tracked.found() || tracked.markers <= forwardMarkers[f])
+            continue;
+        body.posedAlone[f] = 1;
+        body.T_rig_from_body_alone[f] = tracked.T_rig_from_model;
+    }
+    counters_.framesTracked += 2 * frames;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Joining the pieces of one body
 
 bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     bool joined = false;
     const std::size_t frames = session.frames();
+    std::size_t alive = 0;
+    for (std::size_t b = 0; b < bodies_.size(); ++b)
+        alive += bodies_[b].alive ? 1u : 0u;
+    if (alive < 2)
+        return false;
+    for (std::size_t b = 0; b < bodies_.size(); ++b)
+        if (bodies_[b].alive)
+            trackAlone(session, b);
     std::vector<RigidTransform> relative;
     std::vector<RigidTransform> agreeing;
     for (std::size_t a = 0; a < bodies_.size(); ++a) {
@@ -348,48 +401,74 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             if (!into.alive || !from.alive)
                 continue;
             const Extent ball = extentOf(from.markers_mm);
-            // b's frame to a's in every frame both were found.
-            relative.clear();
-            for (std::size_t f = 0; f < frames; ++f)
-                if (into.posed[f] && from.posed[f])
-                    relative.push_back(into.T_rig_from_body[f].inverse() * from.T_rig_from_body[f]);
-            std::optional<RigidTransform> intoFromFrom;
-            if (relative.size() >= config_.minSharedFrames) {
-                // The relative pose most frames agree with; one body keeps one relative pose.
+            // b's frame to a's in every frame both were found (jointly, or each alone), and the
+            // relative pose most of them agree with: one body keeps one relative pose.
+            struct Consensus {
+                std::size_t shared = 0;
+                std::optional<RigidTransform> intoFromFrom;
+            };
+            auto consensus = [&](bool alone) {
+                Consensus c;
+                relative.clear();
+                for (std::size_t f = 0; f < frames; ++f) {
+                    if (alone ? into.posedAlone[f] && from.posedAlone[f]
+                              : into.posed[f] && from.posed[f])
+                        relative.push_back(alone ? into.T_rig_from_body_alone[f].inverse() *
+                                                       from.T_rig_from_body_alone[f]
+                                                 : into.T_rig_from_body[f].inverse() *
+                                                       from.T_rig_from_body[f]);
+                }
+                c.shared = relative.size();
+                if (c.shared < config_.minSharedFrames)
+                    return c;
                 std::size_t bestAgree = 0;
                 std::size_t bestCandidate = 0;
                 const std::size_t step =
                     std::max<std::size_t>(1, relative.size() / kConsensusCandidates);
-                for (std::size_t c = 0; c < relative.size(); c += step) {
+                for (std::size_t k = 0; k < relative.size(); k += step) {
                     std::size_t agree = 0;
                     for (const RigidTransform& r : relative)
-                        if (disagreement_mm(r, relative[c], ball) <= config_.sameBodyTolerance_mm)
+                        if (disagreement_mm(r, relative[k], ball) <= config_.sameBodyTolerance_mm)
                             ++agree;
                     if (agree > bestAgree) {
                         bestAgree = agree;
-                        bestCandidate = c;
+                        bestCandidate = k;
                     }
                 }
-                if (static_cast<double>(bestAgree) >=
-                    config_.sameBodyShare * static_cast<double>(relative.size())) {
-                    agreeing.clear();
-                    for (const RigidTransform& r : relative)
-                        if (disagreement_mm(r, relative[bestCandidate], ball) <=
-                            config_.sameBodyTolerance_mm)
-                            agreeing.push_back(r);
-                    intoFromFrom = meanTransform(agreeing, ball);
-                    ++counters_.joinedByMotion;
-                }
-            } else {
-                // Seldom found at once: one may be a piece of the other that the tracker gave the
-                // other's points to. Its layout then lies in the other's.
-                const Registration r =
-                    registerLayout(from.markers_mm, into.markers_mm, config_.sameBodyTolerance_mm);
-                if (r.matched >= 4 && 2 * r.matched >= from.markers_mm.size()) {
-                    intoFromFrom = r.wholeFromPart;
-                    ++counters_.joinedByLayout;
+                if (static_cast<double>(bestAgree) <
+                    config_.sameBodyShare * static_cast<double>(relative.size()))
+                    return c;
+                agreeing.clear();
+                for (const RigidTransform& r : relative)
+                    if (disagreement_mm(r, relative[bestCandidate], ball) <=
+                        config_.sameBodyTolerance_mm)
+                        agreeing.push_back(r);
+                c.intoFromFrom = meanTransform(agreeing, ball);
+                return c;
+            };
+            // Found together often by the joint tracker, they are one body only if they move as
+            // one; two alike objects would each be found alone on the same points.
+            const Consensus joint = consensus(false);
+            std::optional<RigidTransform> intoFromFrom = joint.intoFromFrom;
+            bool byLayout = false;
+            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
+                // Seldom found at once jointly: pieces that share markers, whose shared points the
+                // joint tracker gives to one of them. Each found alone, they move as one.
+                intoFromFrom = consensus(true).intoFromFrom;
+                if (!intoFromFrom) {
+                    // One may be a piece of the other that the tracker gave the other's points to
+                    // (and that, alone, lands on several places of a self-similar layout). Its
+                    // layout then lies in the other's.
+                    const Registration r = registerLayout(from.markers_mm, into.markers_mm,
+                                                          config_.sameBodyTolerance_mm);
+                    if (r.matched >= 4 && 2 * r.matched >= from.markers_mm.size()) {
+                        intoFromFrom = r.wholeFromPart;
+                        byLayout = true;
+                    }
                 }
             }
+            if (intoFromFrom)
+                ++(byLayout ? counters_.joinedByLayout : counters_.joinedByMotion);
             if (!intoFromFrom) {
                 // Never in view together: one piece of a turning body may come into view just as
                 // the other leaves. The pose of the one, carried on at its speed, then lands on
@@ -459,11 +538,11 @@ CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session,
     auto handover = [&](const Body& first, const Body& second, const Extent& firstBall,
                         bool firstIsA) {
         for (std::size_t f = 1; f < frames; ++f) {
-            if (!second.posed[f] || second.posed[f - 1] || first.posed[f])
+            if (!second.posedAlone[f] || second.posedAlone[f - 1] || first.posedAlone[f])
                 continue;
             std::size_t end = f; // the earlier body's last posed frame before f
             for (std::size_t back = 1; back <= kHandoverGap_frames && back <= f; ++back)
-                if (first.posed[f - back]) {
+                if (first.posedAlone[f - back]) {
                     end = f - back;
                     break;
                 }
@@ -472,13 +551,15 @@ CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session,
             const std::size_t start = end - kSpeedBaseline_frames;
             bool steady = true;
             for (std::size_t g = start; g <= end; ++g)
-                steady = steady && first.posed[g] != 0;
+                steady = steady && first.posedAlone[g] != 0;
             if (!steady)
                 continue;
-            const RigidTransform carried = extrapolate(
-                first.T_rig_from_body[start], session.time_s(start), first.T_rig_from_body[end],
-                session.time_s(end), session.time_s(f), firstBall.centre);
-            const RigidTransform firstFromSecond = carried.inverse() * second.T_rig_from_body[f];
+            const RigidTransform carried =
+                extrapolate(first.T_rig_from_body_alone[start], session.time_s(start),
+                            first.T_rig_from_body_alone[end], session.time_s(end),
+                            session.time_s(f), firstBall.centre);
+            const RigidTransform firstFromSecond =
+                carried.inverse() * second.T_rig_from_body_alone[f];
             estimates.push_back(firstIsA ? firstFromSecond : firstFromSecond.inverse());
         }
     };

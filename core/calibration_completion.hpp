@@ -141,6 +141,10 @@ private:
         std::vector<std::pair<std::uint16_t, std::uint16_t>> edges;
         std::vector<RigidTransform> T_rig_from_body;
         std::vector<std::uint8_t> posed;
+        /// Its poses when tracked with no other body: where pieces of one object share markers,
+        /// the joint tracker gives the shared points to one of them, and the other goes unposed.
+        std::vector<RigidTransform> T_rig_from_body_alone;
+        std::vector<std::uint8_t> posedAlone;
         bool alive = true;
     };
     struct Site {
@@ -150,7 +154,11 @@ private:
         std::int32_t next = -1;
     };
 
+    /// \brief Models of the bodies [0, count) for the tracker: their markers, co-visibility (or
+    /// every pair while none is known) and S_min as completion tracks.
+    std::vector<MarkerModel> trackingModels(std::size_t count) const;
     void trackAll(const SessionBuffer& session);
+    void trackAlone(const SessionBuffer& session, std::size_t body);
     /// \return whether any were joined.
     bool joinBodies(const SessionBuffer& session);
     /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
