@@ -285,7 +285,6 @@ std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count
 }
 
 void CalibrationCompletion::trackAll(const SessionBuffer& session) {
-    const std::size_t frames = session.frames();
     std::stable_sort(bodies_.begin(), bodies_.end(), [](const Body& a, const Body& b) {
         if (a.alive != b.alive)
             return a.alive;
@@ -294,14 +293,24 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     std::size_t alive = 0;
     while (alive < bodies_.size() && bodies_[alive].alive)
         ++alive;
-    for (std::size_t b = 0; b < alive; ++b)
-        std::fill(bodies_[b].posed.begin(), bodies_[b].posed.end(), std::uint8_t{0});
     if (alive == 0)
         return;
-    const std::vector<MarkerModel> models = trackingModels(alive);
+    std::vector<PoseTrack> tracks;
+    for (std::size_t b = 0; b < alive; ++b)
+        tracks.push_back({&bodies_[b].posed, &bodies_[b].T_rig_from_body});
+    trackBothWays(session, trackingModels(alive), tracks);
+}
 
+void CalibrationCompletion::trackBothWays(const SessionBuffer& session,
+                                          const std::vector<MarkerModel>& models,
+                                          std::span<const PoseTrack> tracks) {
+    const std::size_t frames = session.frames();
+    for (const PoseTrack& track : tracks) {
+        track.posed->assign(frames, 0);
+        track.T_rig_from_body->resize(frames);
+    }
     // Forwards, then backwards in time; each frame takes whichever pass matched more markers over
-    // all bodies, as a whole, so that no point serves two bodies in one frame.
+    // all models, as a whole, so that no point serves two bodies in one frame.
     std::vector<std::uint32_t> forwardMarkers(frames, 0);
     {
         ModelTracker tracker(models, config_.tracking);
@@ -309,12 +318,12 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             return;
         for (std::size_t f = 0; f < frames; ++f) {
             tracker.update(session.time_s(f), session.points(f));
-            for (std::size_t b = 0; b < alive; ++b) {
+            for (std::size_t b = 0; b < tracks.size(); ++b) {
                 const TrackedBody& tracked = tracker.bodies()[b];
                 if (!tracked.found())
                     continue;
-                bodies_[b].posed[f] = 1;
-                bodies_[b].T_rig_from_body[f] = tracked.T_rig_from_model;
+                (*tracks[b].posed)[f] = 1;
+                (*tracks[b].T_rig_from_body)[f] = tracked.T_rig_from_model;
                 forwardMarkers[f] += tracked.markers;
             }
         }
@@ -329,51 +338,12 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
                 total += tracked.markers;
         if (total <= forwardMarkers[f])
             continue;
-        for (std::size_t b = 0; b < alive; ++b) {
+        for (std::size_t b = 0; b < tracks.size(); ++b) {
             const TrackedBody& tracked = tracker.bodies()[b];
-            bodies_[b].posed[f] = tracked.found() ? 1 : 0;
+            (*tracks[b].posed)[f] = tracked.found() ? 1 : 0;
             if (tracked.found())
-                bodies_[b].T_rig_from_body[f] = tracked.T_rig_from_model;
+                (*tracks[b].T_rig_from_body)[f] = tracked.T_rig_from_model;
         }
-    }
-    counters_.framesTracked += 2 * frames;
-}
-
-void CalibrationCompletion::trackAlone(const SessionBuffer& session, std::size_t index) {
-    const std::size_t frames = session.frames();
-    Body& body = bodies_[index];
-    body.posedAlone.assign(frames, 0);
-    body.T_rig_from_body_alone.resize(frames);
-    // The body's model as the only one, id 0: the bodies before it are copied and left out.
-    std::vector<MarkerModel> models = trackingModels(index + 1);
-    MarkerModel alone = std::move(models.back());
-    alone.id = 0;
-    models.clear();
-    models.push_back(std::move(alone));
-    std::vector<std::uint32_t> forwardMarkers(frames, 0);
-    {
-        ModelTracker tracker(models, config_.tracking);
-        if (!tracker.isValid())
-            return;
-        for (std::size_t f = 0; f < frames; ++f) {
-            tracker.update(session.time_s(f), session.points(f));
-            const TrackedBody& tracked = tracker.bodies()[0];
-            if (!tracked.found())
-                continue;
-            body.posedAlone[f] = 1;
-            body.T_rig_from_body_alone[f] = tracked.T_rig_from_model;
-            forwardMarkers[f] = tracked.markers;
-        }
-    }
-    ModelTracker tracker(models, config_.tracking);
-    for (std::size_t step = 0; step < frames; ++step) {
-        const std::size_t f = frames - 1 - step;
-        tracker.update(-session.time_s(f), session.points(f));
-        const TrackedBody& tracked = tracker.bodies()[0];
-        if (!tracked.found() || tracked.markers <= forwardMarkers[f])
-            continue;
-        body.posedAlone[f] = 1;
-        body.T_rig_from_body_alone[f] = tracked.T_rig_from_model;
     }
     counters_.framesTracked += 2 * frames;
 }
@@ -389,9 +359,16 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
         alive += bodies_[b].alive ? 1u : 0u;
     if (alive < 2)
         return false;
-    for (std::size_t b = 0; b < bodies_.size(); ++b)
-        if (bodies_[b].alive)
-            trackAlone(session, b);
+    // Each body tracked alone, with S_min as the joint tracker has it: the bodies that are alive
+    // come first (trackAll sorted them), so their models are those of the joint tracking.
+    const std::vector<MarkerModel> models = trackingModels(alive);
+    for (std::size_t b = 0; b < alive; ++b) {
+        std::vector<MarkerModel> alone;
+        alone.emplace_back(config_.maxMarkersPerModel).assign(models[b]);
+        alone.back().id = 0;
+        const PoseTrack track{&bodies_[b].posedAlone, &bodies_[b].T_rig_from_body_alone};
+        trackBothWays(session, alone, std::span(&track, 1));
+    }
     std::vector<RigidTransform> relative;
     std::vector<RigidTransform> agreeing;
     for (std::size_t a = 0; a < bodies_.size(); ++a) {

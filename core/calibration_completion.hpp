@@ -157,8 +157,17 @@ private:
     /// \brief Models of the bodies [0, count) for the tracker: their markers, co-visibility (or
     /// every pair while none is known) and S_min as completion tracks.
     std::vector<MarkerModel> trackingModels(std::size_t count) const;
+    /// Where one tracked model's poses go: per session frame, whether it was found and its pose.
+    struct PoseTrack {
+        std::vector<std::uint8_t>* posed;
+        std::vector<RigidTransform>* T_rig_from_body;
+    };
+    /// \brief Every alive body tracked together (bodies_ sorted alive first, largest first).
     void trackAll(const SessionBuffer& session);
-    void trackAlone(const SessionBuffer& session, std::size_t body);
+    /// \brief \a models tracked together through the session forwards and backwards; model k's
+    /// poses go to \a tracks[k].
+    void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,
+                       std::span<const PoseTrack> tracks);
     /// \return whether any were joined.
     bool joinBodies(const SessionBuffer& session);
     /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
