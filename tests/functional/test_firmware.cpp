@@ -36,12 +36,17 @@ constexpr auto kFinishingTimeout = std::chrono::seconds(900);
 constexpr auto kFinishingTimeout = std::chrono::seconds(120);
 #endif
 
-/// One step of the frame loop while a calibration finishes, paced as on the board: there the loop
-/// waits for its cameras and the worker (nice 10) gets the processor; stepping the simulated
-/// board's virtual clock in a busy loop would starve the worker on a loaded machine.
+/// The pause after each frame while a calibration finishes, as on the board: there the loop waits
+/// for its cameras and the worker (nice 10) gets the processor; stepping the simulated board's
+/// virtual clock in a busy loop would starve the worker on a loaded machine.
+void leaveTheProcessorToTheWorker() {
+    std::this_thread::sleep_for(std::chrono::microseconds(500));
+}
+
+/// \brief One step of the frame loop while a calibration finishes, paced as on the board.
 void stepBesideTheWorker(Firmware& firmware) {
     firmware.step();
-    std::this_thread::sleep_for(std::chrono::microseconds(500));
+    leaveTheProcessorToTheWorker();
 }
 
 std::unique_ptr<sim::SimBoard> makeBoard(const char* scene, std::uint64_t seed) {
@@ -419,7 +424,7 @@ TEST(FirmwareOnSimBoard, AfterACalibrationADtrackClientShowsNoMarkersAndReadsThe
     const auto begin = std::chrono::steady_clock::now();
     while (firmware.state() != FirmwareState::Tracking) {
         stepAndReceive();
-        std::this_thread::sleep_for(std::chrono::microseconds(500)); // as stepBesideTheWorker
+        leaveTheProcessorToTheWorker();
         ASSERT_LT(std::chrono::steady_clock::now() - begin, kFinishingTimeout);
     }
     for (int f = 0; f < 200; ++f)
@@ -603,13 +608,9 @@ void expectCanMatchesUdp(bool fd) {
     std::size_t compared = 0;
     for (int f = 0; f < kCanFrames; ++f) {
         firmware.step();
-        sim::SimUdpSender::Datagram datagram;
-        ParsedDtrack udpFrame;
-        while (sim->udp.takeSent(datagram)) {
-            Result<ParsedDtrack> parsed = parseDtrack(datagram.text());
-            ASSERT_TRUE(parsed) << parsed.error().message;
-            udpFrame = *parsed;
-        }
+        const std::vector<ParsedDtrack> sent = takeDtrack(*sim);
+        ASSERT_FALSE(sent.empty());
+        const ParsedDtrack& udpFrame = sent.back();
         std::map<std::uint32_t, std::map<std::string, double>> signals;
         hal::CanFrame frame;
         while (sim->can.peerReceive(frame)) {
