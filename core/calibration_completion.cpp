@@ -370,7 +370,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
         trackBothWays(session, alone, std::span(&track, 1));
     }
     std::vector<RigidTransform> relative;
-    std::vector<RigidTransform> agreeing;
+    std::vector<std::size_t> sharedFrames;
     for (std::size_t a = 0; a < bodies_.size(); ++a) {
         for (std::size_t b = a + 1; b < bodies_.size(); ++b) {
             Body& into = bodies_[a];
@@ -387,17 +387,23 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             auto consensus = [&](bool alone) {
                 Consensus c;
                 relative.clear();
+                sharedFrames.clear();
                 for (std::size_t f = 0; f < frames; ++f) {
                     if (alone ? into.posedAlone[f] && from.posedAlone[f]
-                              : into.posed[f] && from.posed[f])
+                              : into.posed[f] && from.posed[f]) {
                         relative.push_back(alone ? into.T_rig_from_body_alone[f].inverse() *
                                                        from.T_rig_from_body_alone[f]
                                                  : into.T_rig_from_body[f].inverse() *
                                                        from.T_rig_from_body[f]);
+                        sharedFrames.push_back(f);
+                    }
                 }
                 c.shared = relative.size();
                 if (c.shared < config_.minSharedFrames)
                     return c;
+                // The relative pose most frames come near is only a start: a pose from three or
+                // four markers turns by a degree or two, which moves a far marker by millimetres.
+                // The judgement is the fit of both layouts as one to every shared frame's points.
                 std::size_t bestAgree = 0;
                 std::size_t bestCandidate = 0;
                 const std::size_t step =
@@ -412,15 +418,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                         bestCandidate = k;
                     }
                 }
-                if (static_cast<double>(bestAgree) <
-                    config_.sameBodyShare * static_cast<double>(relative.size()))
-                    return c;
-                agreeing.clear();
-                for (const RigidTransform& r : relative)
-                    if (disagreement_mm(r, relative[bestCandidate], ball) <=
-                        config_.sameBodyTolerance_mm)
-                        agreeing.push_back(r);
-                c.intoFromFrom = meanTransform(agreeing, ball);
+                const OneBodyFit fit =
+                    fitAsOneBody(session, sharedFrames, into, from, alone, relative[bestCandidate]);
+                if (static_cast<double>(fit.framesFitting) >=
+                    config_.sameBodyShare * static_cast<double>(c.shared))
+                    c.intoFromFrom = fit.intoFromFrom;
                 return c;
             };
             // Found together often by the joint tracker, they are one body only if they move as
@@ -484,6 +486,135 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
         }
     }
     return joined;
+}
+
+CalibrationCompletion::OneBodyFit
+CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
+                                    std::span<const std::size_t> sharedFrames, const Body& a,
+                                    const Body& b, bool alone, const RigidTransform& aFromB) const {
+    OneBodyFit result;
+    result.intoFromFrom = aFromB;
+    const auto& posesA = alone ? a.T_rig_from_body_alone : a.T_rig_from_body;
+    const auto& posesB = alone ? b.T_rig_from_body_alone : b.T_rig_from_body;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+    const std::size_t nA = a.markers_mm.size();
+    const std::size_t nB = b.markers_mm.size();
+    std::vector<Vec3> layout_a_mm(nA + nB);
+    // b's markers that are a's too (under aFromB): the index of a's, or -1 for b's own.
+    std::vector<std::int32_t> sameAs(nB);
+    std::vector<Vec3> from, to, sums(nB);
+    std::vector<std::size_t> which, ownAt;
+    std::vector<std::uint32_t> counts(nB);
+    std::vector<const Vec3*> matchedA(nA);
+    auto nearest = [&](std::span<const Vec3> points, const Vec3& there) -> const Vec3* {
+        double best2 = radius * radius;
+        const Vec3* match = nullptr;
+        for (const Vec3& p : points) {
+            const double d2 = (p - there).squaredNorm();
+            if (d2 <= best2) {
+                best2 = d2;
+                match = &p;
+            }
+        }
+        return match;
+    };
+    // Alternating least squares, as refine() does for one body: the union fitted to each frame,
+    // then b's markers placed in a's frame by those fits.
+    constexpr int kIterations = 3;
+    for (int iteration = 0; iteration < kIterations; ++iteration) {
+        for (std::size_t k = 0; k < nA; ++k)
+            layout_a_mm[k] = a.markers_mm[k];
+        for (std::size_t k = 0; k < nB; ++k) {
+            layout_a_mm[nA + k] = result.intoFromFrom.apply(b.markers_mm[k]);
+            sameAs[k] = -1;
+            for (std::size_t m = 0; m < nA; ++m)
+                if ((a.markers_mm[m] - layout_a_mm[nA + k]).squaredNorm() < spacing2)
+                    sameAs[k] = static_cast<std::int32_t>(m);
+        }
+        std::fill(sums.begin(), sums.end(), Vec3::Zero());
+        std::fill(counts.begin(), counts.end(), 0U);
+        result.framesFitting = 0;
+        for (const std::size_t f : sharedFrames) {
+            const std::span<const Vec3> points = session.points(f);
+            from.clear();
+            to.clear();
+            which.clear();
+            ownAt.clear();
+            for (std::size_t k = 0; k < nA; ++k) {
+                matchedA[k] = nearest(points, posesA[f].apply(a.markers_mm[k]));
+                if (matchedA[k]) {
+                    from.push_back(layout_a_mm[k]);
+                    to.push_back(*matchedA[k]);
+                }
+            }
+            const std::size_t ofA = from.size();
+            // b's markers where b's pose puts them: its own join the fit, a shared one must be
+            // the point a's pose found for it.
+            std::size_t ofB = 0;
+            bool consistent = true;
+            for (std::size_t k = 0; k < nB && consistent; ++k) {
+                const Vec3* p = nearest(points, posesB[f].apply(b.markers_mm[k]));
+                if (!p)
+                    continue;
+                if (sameAs[k] >= 0) {
+                    const Vec3* pa = matchedA[static_cast<std::size_t>(sameAs[k])];
+                    if (pa && pa != p)
+                        consistent = false;
+                    if (!pa) {
+                        from.push_back(a.markers_mm[static_cast<std::size_t>(sameAs[k])]);
+                        to.push_back(*p);
+                    }
+                    ++ofB;
+                    continue;
+                }
+                if (std::any_of(matchedA.begin(), matchedA.end(),
+                                [p](const Vec3* q) { return q == p; })) {
+                    consistent = false; // a point of one of a's markers, not where b's own is
+                    continue;
+                }
+                which.push_back(k);
+                ownAt.push_back(from.size());
+                from.push_back(layout_a_mm[nA + k]);
+                to.push_back(*p);
+                ++ofB;
+            }
+            if (!consistent || ofA < 2 || ofB < 2)
+                continue;
+            const std::optional<RigidFit> fit = fitRigid(from, to);
+            if (!fit)
+                continue;
+            bool fits = true;
+            for (std::size_t i = 0; i < from.size() && fits; ++i)
+                fits =
+                    (fit->transform.apply(from[i]) - to[i]).norm() <= config_.sameBodyTolerance_mm;
+            if (!fits)
+                continue;
+            ++result.framesFitting;
+            const RigidTransform aFromRig = fit->transform.inverse();
+            for (std::size_t i = 0; i < which.size(); ++i) {
+                sums[which[i]] += aFromRig.apply(to[ownAt[i]]);
+                ++counts[which[i]];
+            }
+        }
+        // b's own markers, and its shared ones where a has them, place b in a's frame.
+        from.clear();
+        to.clear();
+        for (std::size_t k = 0; k < nB; ++k) {
+            if (counts[k] > 0) {
+                from.push_back(b.markers_mm[k]);
+                to.push_back(sums[k] / static_cast<double>(counts[k]));
+            } else if (sameAs[k] >= 0) {
+                from.push_back(b.markers_mm[k]);
+                to.push_back(a.markers_mm[static_cast<std::size_t>(sameAs[k])]);
+            }
+        }
+        const std::optional<RigidFit> placed = fitRigid(from, to);
+        if (!placed || iteration + 1 == kIterations)
+            break;
+        result.intoFromFrom = placed->transform;
+    }
+    return result;
 }
 
 namespace {

@@ -41,11 +41,12 @@ struct CompletionConfig {
     std::size_t maxSites = 65536;
     /// Rounds of tracking, joining and re-measuring; it stops earlier once nothing changes.
     int maxRounds = 8;
-    /// Two objects seen at once in this many frames with (nearly) one relative pose in at least
-    /// sameBodyShare of them move as one rigid body.
-    std::size_t minSharedFrames = 20;
+    /// Two objects found at once in this many frames are one rigid body when both layouts, joined
+    /// by one relative pose, fit the points of at least sameBodyShare of those frames as one.
+    std::size_t minSharedFrames = 10;
     double sameBodyShare = 0.8;
-    /// Relative poses agree when they place the objects' markers within this of each other (mm).
+    /// Fitted as one, every point lies within this of its marker (mm); also how close relative
+    /// poses must come to start that fit.
     double sameBodyTolerance_mm = 2.0;
     /// Relative poses found by carrying one piece's pose on at its speed until the other piece
     /// comes into view agree within this (mm).
@@ -170,6 +171,19 @@ private:
                        std::span<const PoseTrack> tracks);
     /// \return whether any were joined.
     bool joinBodies(const SessionBuffer& session);
+    struct OneBodyFit {
+        /// b's frame to a's, refined by least squares over the frames that fit.
+        RigidTransform intoFromFrom;
+        /// Shared frames whose points the union of both layouts fits, every point within
+        /// sameBodyTolerance_mm, each body with two or more markers found where its own pose puts
+        /// them (a marker they share must be the same point for both).
+        std::size_t framesFitting = 0;
+    };
+    /// \brief Whether \a a and \a b, found at once in \a sharedFrames (jointly, or each alone
+    /// when \a alone), are one rigid body: their layouts joined by \a aFromB and fitted as one.
+    OneBodyFit fitAsOneBody(const SessionBuffer& session, std::span<const std::size_t> sharedFrames,
+                            const Body& a, const Body& b, bool alone,
+                            const RigidTransform& aFromB) const;
     /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
     /// with, if there were enough.
     std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,
