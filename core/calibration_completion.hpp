@@ -79,6 +79,8 @@ struct CompletionConfig {
 struct CompletionCounters {
     std::uint64_t rounds = 0;
     std::uint64_t framesTracked = 0;
+    /// Frames in which a body the tracker had lost was followed on from a neighbouring frame.
+    std::uint64_t framesFollowed = 0;
     std::uint64_t seeds = 0;
     /// Objects joined because they moved as one body, or because one's layout lies in the other's
     /// and they were never seen apart.
@@ -169,6 +171,12 @@ private:
     /// poses go to \a tracks[k].
     void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,
                        std::span<const PoseTrack> tracks);
+    /// \brief \a body followed frame by frame into the frames next to its poses where the
+    /// tracker lost it: its pose carried on at its speed, fitted to the points near its markers
+    /// and near points that sat at one place in its frame for a few frames, as the online stage
+    /// follows a turning object whose markers come and go. Those points become markers only if
+    /// measure() finds them so.
+    void follow(const SessionBuffer& session, Body& body);
     /// \return whether any were joined.
     bool joinBodies(const SessionBuffer& session);
     struct OneBodyFit {
