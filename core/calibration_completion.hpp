@@ -82,6 +82,8 @@ struct CompletionCounters {
     /// Frames in which a body the tracker had lost was followed on from a neighbouring frame.
     std::uint64_t framesFollowed = 0;
     std::uint64_t seeds = 0;
+    /// Bodies found in the session's points that no seed explained.
+    std::uint64_t discovered = 0;
     /// Objects joined because they moved as one body, or because one's layout lies in the other's
     /// and they were never seen apart.
     std::uint64_t joinedByMotion = 0;
@@ -171,6 +173,9 @@ private:
     /// poses go to \a tracks[k].
     void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,
                        std::span<const PoseTrack> tracks);
+    /// \brief New bodies from sets of four or more points that no body explains, that keep their
+    /// distances while they move over a third of a second; each tracked through the session.
+    void discoverBodies(const SessionBuffer& session);
     /// \brief \a body followed frame by frame into the frames next to its poses where the
     /// tracker lost it: its pose carried on at its speed, fitted to the points near its markers
     /// and near points that sat at one place in its frame for a few frames, as the online stage

@@ -449,11 +449,14 @@ int main(int argc, char** argv) {
                     online.strayModels, online.falseMarkers,
                     complete(online) ? "complete" : "incomplete");
         const CompletionCounters& k = completionCounters;
-        std::printf("completion: %.2f s, %llu seeds, %llu rounds, %llu frames followed, joined "
-                    "%llu by motion, %llu by layout and %llu by handover, dropped %llu, markers added %llu and removed "
+        std::printf("completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
+                    "followed, joined "
+                    "%llu by motion, %llu by layout and %llu by handover, dropped %llu, markers "
+                    "added %llu and removed "
                     "%llu, overflow "
                     "sites/models/markers %llu/%llu/%llu\n",
                     completion_s, static_cast<unsigned long long>(k.seeds),
+                    static_cast<unsigned long long>(k.discovered),
                     static_cast<unsigned long long>(k.rounds),
                     static_cast<unsigned long long>(k.framesFollowed),
                     static_cast<unsigned long long>(k.joinedByMotion),

@@ -179,15 +179,16 @@ TEST(CalibrationCompletion, JoinsTwoPiecesOfOneBodySeenTogetherOnlyBriefly) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
-// A body whose markers come into view two at a time as two others leave, as a turning object
-// shows one side after another: no frame holds three markers of the model and three new ones, so
-// the tracker loses the model as soon as its side turns away. Followed frame to frame (the turn
+// A body whose markers come into view two at a time as two others leave, every quarter second,
+// as a turning object shows one side after another: no frame holds three markers of the model and
+// three new ones, so the tracker loses the model as soon as its side turns away, and no four
+// markers are in view together long enough to be found as a body of their own. Followed frame to frame (the turn
 // about the two markers still in view carried on for a few frames), every side is learnt.
 TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoTwoAtATime) {
     const std::vector<Vec3> body = test::irregularLayout(10, 18, 15.0);
     const SessionBuffer session =
         sessionWhere({body}, 10.0, 0.05, 8, [](std::size_t, std::size_t m, double t) {
-            const auto first = 2 * static_cast<std::size_t>(t / 0.5);
+            const auto first = 2 * static_cast<std::size_t>(t / 0.25);
             return (m + 10 - first % 10) % 10 < 4;
         });
     const CompletionConfig config;
@@ -198,6 +199,36 @@ TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoTwoAtATime) {
     // The largest error of the 45 distances: the sides form a chain that four alternations of pose
     // and marker least squares straighten only so far (0.16 mm; under 0.1 mm after 20).
     EXPECT_LT(layoutError_mm(out[0], body), 0.2);
+}
+
+// A body the online stage made no model of (no seed at all) is found in the session's points as a
+// set that keeps its distances while it moves; four reflections of the room that stand still keep
+// theirs too, but are no body.
+TEST(CalibrationCompletion, FindsABodyNoSeedExplainsButNotReflectionsThatStandStill) {
+    const std::vector<Vec3> body = test::irregularLayout(6, 19, 15.0);
+    const std::vector<Vec3> reflections{Vec3(-150, 40, 700), Vec3(-120, 60, 720),
+                                        Vec3(-170, 90, 690), Vec3(-140, 20, 760)};
+    const std::size_t frames = 1000;
+    SessionBuffer session(frames, frames * 16);
+    std::mt19937 random(9);
+    std::normal_distribution<double> noise(0.0, 0.1);
+    std::vector<Vec3> points;
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        const RigidTransform pose = turning(t, Vec3(40.0, 0.0, 600.0), 0.0);
+        points.clear();
+        for (const Vec3& m : body)
+            points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
+        for (const Vec3& r : reflections)
+            points.push_back(r + Vec3(noise(random), noise(random), noise(random)));
+        session.append(t, points);
+    }
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, {}, out), 1U);
+    EXPECT_GE(completion.counters().discovered, 1U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
 // Two bodies turning on their own, in view at once for 0.15 s: found together, but no one layout
