@@ -182,8 +182,9 @@ TEST(CalibrationCompletion, JoinsTwoPiecesOfOneBodySeenTogetherOnlyBriefly) {
 // A body whose markers come into view two at a time as two others leave, every quarter second,
 // as a turning object shows one side after another: no frame holds three markers of the model and
 // three new ones, so the tracker loses the model as soon as its side turns away, and no four
-// markers are in view together long enough to be found as a body of their own. Followed frame to frame (the turn
-// about the two markers still in view carried on for a few frames), every side is learnt.
+// markers are in view together long enough to be found as a body of their own. Followed frame to
+// frame (the turn about the two markers still in view carried on for a few frames), every side is
+// learnt.
 TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoTwoAtATime) {
     const std::vector<Vec3> body = test::irregularLayout(10, 18, 15.0);
     const SessionBuffer session =
