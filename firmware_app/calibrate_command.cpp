@@ -94,11 +94,13 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << c.memberOverflow << ", clustering deferred " << c.clusteringDeferred
             << "; objects evicted " << c.objectsEvicted << "\n";
     const CompletionCounters& k = session.completionCounters();
-    summary << "  completion: " << session.seedsUsed() << " online models in, " << k.rounds
-            << " rounds; " << k.joinedByMotion + k.joinedByLayout << " pieces joined, " << k.dropped
-            << " dropped; markers added " << k.markersAdded << ", removed " << k.markersRemoved
-            << "; refused: places " << k.siteOverflow << ", models " << k.modelOverflow
-            << ", markers " << k.markerOverflow << "\n";
+    summary << "  completion: " << session.seedsUsed() << " online models in, " << k.discovered
+            << " bodies found in the points, " << k.rounds << " rounds; "
+            << k.joinedByMotion + k.joinedByLayout + k.joinedByHandover << " pieces joined, "
+            << k.framesFollowed << " frames followed, " << k.dropped << " dropped; markers added "
+            << k.markersAdded << ", removed " << k.markersRemoved << "; refused: places "
+            << k.siteOverflow << ", models " << k.modelOverflow << ", markers " << k.markerOverflow
+            << "\n";
     return Ok{};
 }
 
