@@ -10,12 +10,15 @@
 // RMS position error. Every second it also exports the models so far and reports when they first
 // held every marker that was in view for at least --min-seen-s seconds. Exits 1 on a missed target.
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -229,6 +232,9 @@ int main(int argc, char** argv) {
             layouts.back().push_back(m.position_object_mm);
         framesSeen.emplace_back(o.object.markers.size(), 0);
     }
+    // Per object, every set of three or more of its markers seen together (a bit per marker; an
+    // object of more than 64 markers is not looked at): what the data can tie together rigidly.
+    std::vector<std::set<std::uint64_t>> seenTogether(layouts.size());
 
     struct Seen {
         std::pair<int, int> first{-1, -1};
@@ -370,6 +376,16 @@ int main(int argc, char** argv) {
             if (static_cast<std::size_t>(source) < observation.markers.size())
                 ++visibleOf[static_cast<std::size_t>(
                     observation.markers[static_cast<std::size_t>(source)].object)];
+        std::vector<std::uint64_t> together(layouts.size(), 0);
+        for (const int source : visible)
+            if (static_cast<std::size_t>(source) < observation.markers.size()) {
+                const sim::MarkerView& m = observation.markers[static_cast<std::size_t>(source)];
+                if (m.marker < 64)
+                    together[static_cast<std::size_t>(m.object)] |= std::uint64_t{1} << m.marker;
+            }
+        for (std::size_t k = 0; k < layouts.size(); ++k)
+            if (layouts[k].size() <= 64 && std::popcount(together[k]) >= 3)
+                seenTogether[k].insert(together[k]);
         for (const int source : visible)
             if (static_cast<std::size_t>(source) < observation.markers.size()) {
                 const sim::MarkerView& m = observation.markers[static_cast<std::size_t>(source)];
@@ -478,6 +494,30 @@ int main(int argc, char** argv) {
                     k, world.scene().objects[k].object.name.c_str(), layouts[k].size(), o.models,
                     o.found, o.expected, minSeen_s, o.duplicates, o.rms_mm,
                     learnable(o) ? "" : " (not learnable: fewer than 4 markers in view so long)");
+        // Sets seen together, merged while they share three markers, are what geometry alone
+        // ties into one rigid layout; due markers in two or more such groups can be joined only
+        // through motion across the frames between them.
+        std::vector<std::uint64_t> groups(seenTogether[k].begin(), seenTogether[k].end());
+        for (bool merged = true; merged;) {
+            merged = false;
+            for (std::size_t i = 0; i < groups.size() && !merged; ++i)
+                for (std::size_t j = i + 1; j < groups.size() && !merged; ++j)
+                    if (std::popcount(groups[i] & groups[j]) >= 3) {
+                        groups[i] |= groups[j];
+                        groups.erase(groups.begin() + static_cast<std::ptrdiff_t>(j));
+                        merged = true;
+                    }
+        }
+        std::uint64_t due = 0;
+        for (std::size_t m = 0; m < expected[k].size() && m < 64; ++m)
+            if (expected[k][m])
+                due |= std::uint64_t{1} << m;
+        const auto tiedGroups = std::count_if(groups.begin(), groups.end(),
+                                              [&](std::uint64_t g) { return (g & due) != 0; });
+        if (learnable(o) && layouts[k].size() <= 64 && tiedGroups > 1)
+            std::printf("    its due markers lie in %lld rigid groups that never share three "
+                        "markers in view\n",
+                        static_cast<long long>(tiedGroups));
     }
     for (std::size_t i = 0; i < count; ++i)
         std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
