@@ -43,6 +43,13 @@ constexpr double kDiscoveryGate_mm = 4.0;
 /// finds it in this much of the session (s).
 constexpr double kDiscoveryMotion_mm = 3.0;
 constexpr double kDiscoveredMinFound_s = 1.0;
+/// Two models' markers are the same marker when one model registered onto the other puts them
+/// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
+/// four markers of one random layout already land on four of another by chance.
+constexpr double kRegistrationTolerance_mm = 0.5;
+/// Congruent triangle pairs a registration tries at most: a self-similar layout (a sphere of many
+/// markers) has thousands, and the first few hundred already show that it registers several ways.
+constexpr std::size_t kRegistrationCandidates = 20000;
 
 struct Extent {
     Vec3 centre = Vec3::Zero();
@@ -88,64 +95,118 @@ RigidTransform meanTransform(std::span<const RigidTransform> transforms, const E
 }
 
 /// The transform that puts the most markers of \a part onto markers of \a whole (within
-/// \a tolerance_mm), from congruent triangles; and how many it puts there.
+/// \a tolerance_mm), from congruent triangles; how many it puts there; and how many the best
+/// transform that differs from it puts there (a self-similar layout registers in several ways).
 struct Registration {
     RigidTransform wholeFromPart;
     std::size_t matched = 0;
+    std::size_t runnerUp = 0;
 };
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
-                            double tolerance_mm) {
+                            double tolerance_mm, double matchTolerance_mm) {
     Registration best;
     const std::size_t n = part.size();
-    if (n < 3 || whole.size() < 3)
+    const std::size_t m = whole.size();
+    if (n < 3 || m < 3)
         return best;
-    const double tol2 = tolerance_mm * tolerance_mm;
-    auto countOn = [&](const RigidTransform& t) {
-        std::size_t count = 0;
-        for (const Vec3& p : part) {
-            const Vec3 moved = t.apply(p);
-            for (const Vec3& w : whole)
-                if ((moved - w).squaredNorm() <= tol2) {
-                    ++count;
+    const double tol2 = matchTolerance_mm * matchTolerance_mm;
+    std::vector<Vec3> from, to;
+    std::vector<std::uint32_t> onto(n);
+    constexpr std::uint32_t kNone = ~0U;
+    auto matchOn = [&](const RigidTransform& t) {
+        from.clear();
+        to.clear();
+        for (std::size_t i = 0; i < n; ++i) {
+            const Vec3 moved = t.apply(part[i]);
+            onto[i] = kNone;
+            for (std::uint32_t w = 0; w < m; ++w)
+                if ((moved - whole[w]).squaredNorm() <= tol2) {
+                    from.push_back(part[i]);
+                    to.push_back(whole[w]);
+                    onto[i] = w;
                     break;
                 }
         }
-        return count;
+        return from.size();
     };
-    // A few well-spread triangles of the part: each must land on a triangle of the whole.
-    std::size_t tried = 0;
-    for (std::size_t i = 0; i < n && tried < 12; ++i)
-        for (std::size_t j = i + 1; j < n && tried < 12; ++j)
-            for (std::size_t k = j + 1; k < n && tried < 12; ++k) {
+    // The whole's pairs by distance, so that each side of a part's triangle finds its
+    // counterparts by a binary search rather than by trying every pair.
+    struct Pair {
+        double d_mm;
+        std::uint32_t x, y;
+    };
+    std::vector<Pair> pairs;
+    pairs.reserve(m * (m - 1));
+    for (std::uint32_t x = 0; x < m; ++x)
+        for (std::uint32_t y = 0; y < m; ++y)
+            if (x != y)
+                pairs.push_back({(whole[x] - whole[y]).norm(), x, y});
+    std::sort(pairs.begin(), pairs.end(),
+              [](const Pair& l, const Pair& r) { return l.d_mm < r.d_mm; });
+    auto near = [&](double d_mm) {
+        const auto lo = std::lower_bound(pairs.begin(), pairs.end(), d_mm - tolerance_mm,
+                                         [](const Pair& p, double v) { return p.d_mm < v; });
+        const auto hi = std::upper_bound(lo, pairs.end(), d_mm + tolerance_mm,
+                                         [](double v, const Pair& p) { return v < p.d_mm; });
+        return std::span<const Pair>(lo, hi);
+    };
+    // Each registration found, as which part marker lies on which whole one.
+    std::vector<std::vector<std::uint32_t>> found;
+    std::vector<std::uint32_t> bestOnto;
+    // Every well-spread triangle of the part against every congruent one of the whole: the
+    // answer must not depend on the order in which either layout lists its markers.
+    std::size_t candidates = 0;
+    for (std::size_t i = 0; i < n && candidates < kRegistrationCandidates; ++i)
+        for (std::size_t j = i + 1; j < n && candidates < kRegistrationCandidates; ++j) {
+            const std::span<const Pair> sidesAB = near((part[i] - part[j]).norm());
+            if (sidesAB.empty())
+                continue;
+            for (std::size_t k = j + 1; k < n; ++k) {
                 const Vec3 &a = part[i], &b = part[j], &c = part[k];
                 const double twiceArea = (b - a).cross(c - a).norm();
                 const double longest = std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
                 if (longest <= 0.0 || twiceArea / longest < 8.0)
                     continue;
-                ++tried;
-                const double dab = (a - b).norm(), dac = (a - c).norm(), dbc = (b - c).norm();
-                for (std::size_t x = 0; x < whole.size(); ++x)
-                    for (std::size_t y = 0; y < whole.size(); ++y) {
-                        if (y == x || std::abs((whole[x] - whole[y]).norm() - dab) > tolerance_mm)
+                const double dac = (a - c).norm(), dbc = (b - c).norm();
+                for (const Pair& xy : sidesAB)
+                    for (std::uint32_t z = 0; z < m; ++z) {
+                        if (z == xy.x || z == xy.y ||
+                            std::abs((whole[xy.x] - whole[z]).norm() - dac) > tolerance_mm ||
+                            std::abs((whole[xy.y] - whole[z]).norm() - dbc) > tolerance_mm)
                             continue;
-                        for (std::size_t z = 0; z < whole.size(); ++z) {
-                            if (z == x || z == y ||
-                                std::abs((whole[x] - whole[z]).norm() - dac) > tolerance_mm ||
-                                std::abs((whole[y] - whole[z]).norm() - dbc) > tolerance_mm)
-                                continue;
-                            const Vec3 from[3] = {a, b, c};
-                            const Vec3 to[3] = {whole[x], whole[y], whole[z]};
-                            const std::optional<RigidFit> fit = fitRigid(from, to);
-                            if (!fit)
-                                continue;
-                            const std::size_t count = countOn(fit->transform);
-                            if (count > best.matched) {
-                                best.matched = count;
-                                best.wholeFromPart = fit->transform;
-                            }
+                        ++candidates;
+                        const Vec3 tri[3] = {a, b, c};
+                        const Vec3 target[3] = {whole[xy.x], whole[xy.y], whole[z]};
+                        const std::optional<RigidFit> seed = fitRigid(tri, target);
+                        if (!seed || matchOn(seed->transform) < 3)
+                            continue;
+                        // Every marker it matches, fitted at once, then matched again.
+                        const std::optional<RigidFit> all = fitRigid(from, to);
+                        const RigidTransform t = all ? all->transform : seed->transform;
+                        const std::size_t count = matchOn(t);
+                        if (std::find(found.begin(), found.end(), onto) == found.end())
+                            found.push_back(onto);
+                        if (count > best.matched) {
+                            best.matched = count;
+                            best.wholeFromPart = t;
+                            bestOnto = onto;
                         }
                     }
             }
+        }
+    if (best.matched == 0)
+        return best;
+    // Another registration is one that shares fewer than three of the best's pairs: one that
+    // shares three is the same placement, matched a little differently.
+    for (const std::vector<std::uint32_t>& other : found) {
+        std::size_t count = 0, common = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            count += other[i] != kNone ? 1U : 0U;
+            common += other[i] != kNone && other[i] == bestOnto[i] ? 1U : 0U;
+        }
+        if (common < 3)
+            best.runnerUp = std::max(best.runnerUp, count);
+    }
     return best;
 }
 
@@ -465,12 +526,14 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // joint tracker gives to one of them. Each found alone, they move as one.
                 intoFromFrom = consensus(true).intoFromFrom;
                 if (!intoFromFrom) {
-                    // One may be a piece of the other that the tracker gave the other's points to
-                    // (and that, alone, lands on several places of a self-similar layout). Its
-                    // layout then lies in the other's.
-                    const Registration r = registerLayout(from.markers_mm, into.markers_mm,
-                                                          config_.sameBodyTolerance_mm);
-                    if (r.matched >= 4 && 2 * r.matched >= from.markers_mm.size()) {
+                    // One may be a piece of the other that the tracker gave the other's points to,
+                    // or the two may share markers but never be in view together. Four or more
+                    // markers in one place of the other's layout tie them, unless a self-similar
+                    // layout lets them lie as well in another place.
+                    const Registration r =
+                        registerLayout(from.markers_mm, into.markers_mm,
+                                       config_.sameBodyTolerance_mm, kRegistrationTolerance_mm);
+                    if (r.matched >= 4 && r.matched > r.runnerUp) {
                         intoFromFrom = r.wholeFromPart;
                         byLayout = true;
                     }

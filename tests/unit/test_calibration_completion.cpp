@@ -202,6 +202,27 @@ TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoTwoAtATime) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.2);
 }
 
+// Two pieces of one body that share four markers but are never in view together, and whose
+// shared markers are never all in view at once: no frame poses both, so only their layouts tie
+// them. The shared four are not the first markers of the second piece, so whichever markers a
+// search tries first, it must find them; and four of nine is less than half the piece.
+TEST(CalibrationCompletion, JoinsTwoPiecesNeverSeenTogetherThatShareFourMarkers) {
+    const std::vector<Vec3> body = test::irregularLayout(14, 20, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 10, [](std::size_t, std::size_t m, double t) {
+            return t < 4.0 ? m <= 7 : t >= 6.0 && m >= 6;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<Vec3> second = subset(body, 9, 5);
+    second.insert(second.begin() + 2, body.begin() + 5, body.begin() + 9);
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 9), second});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 1U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 1U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
 // A body the online stage made no model of (no seed at all) is found in the session's points as a
 // set that keeps its distances while it moves; four reflections of the room that stand still keep
 // theirs too, but are no body.
