@@ -447,14 +447,20 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
         return false;
     // Each body tracked alone, with S_min as the joint tracker has it: the bodies that are alive
     // come first (trackAll sorted them), so their models are those of the joint tracking.
+    // Tracked alone only when a pair needs it: most pairs are told apart by the joint tracking,
+    // and each lone pass costs as much as the joint one.
     const std::vector<MarkerModel> models = trackingModels(alive);
-    for (std::size_t b = 0; b < alive; ++b) {
+    std::vector<char> trackedAlone(alive, 0);
+    auto trackAlone = [&](std::size_t b) {
+        if (trackedAlone[b])
+            return;
+        trackedAlone[b] = 1;
         std::vector<MarkerModel> alone;
         alone.emplace_back(config_.maxMarkersPerModel).assign(models[b]);
         alone.back().id = 0;
         const PoseTrack track{&bodies_[b].posedAlone, &bodies_[b].T_rig_from_body_alone};
         trackBothWays(session, alone, std::span(&track, 1));
-    }
+    };
     std::vector<RigidTransform> relative;
     std::vector<std::size_t> sharedFrames;
     for (std::size_t a = 0; a < bodies_.size(); ++a) {
@@ -524,6 +530,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
                 // Seldom found at once jointly: pieces that share markers, whose shared points the
                 // joint tracker gives to one of them. Each found alone, they move as one.
+                trackAlone(a);
+                trackAlone(b);
                 intoFromFrom = consensus(true).intoFromFrom;
                 if (!intoFromFrom) {
                     // One may be a piece of the other that the tracker gave the other's points to,
@@ -541,7 +549,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             }
             if (intoFromFrom)
                 ++(byLayout ? counters_.joinedByLayout : counters_.joinedByMotion);
-            if (!intoFromFrom) {
+            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
                 // Never in view together: one piece of a turning body may come into view just as
                 // the other leaves. The pose of the one, carried on at its speed, then lands on
                 // the other's pose by one relative pose, every time it happens.

@@ -40,7 +40,7 @@ struct CompletionConfig {
     /// Places looked at per object and round (more are refused and counted).
     std::size_t maxSites = 65536;
     /// Rounds of tracking, joining and re-measuring; it stops earlier once nothing changes.
-    int maxRounds = 8;
+    int maxRounds = 4;
     /// Two objects found at once in this many frames are one rigid body when both layouts, joined
     /// by one relative pose, fit the points of at least sameBodyShare of those frames as one.
     std::size_t minSharedFrames = 10;
