@@ -215,6 +215,8 @@ private:
     std::vector<Body> bodies_;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
+    /// Places hashed by the cell of their position: the first place of each of kSiteCells cells.
+    static constexpr std::size_t kSiteCells = std::size_t{1} << 16;
     std::vector<std::int32_t> cellHead_;
 };
 

@@ -1,5 +1,6 @@
 // Tests of the completion stage: pieces of a body completed and joined, riders left out, order.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -8,6 +9,7 @@
 
 #include "core/calibration_completion.hpp"
 #include "core/calibration_session.hpp"
+#include "core/completion_geometry.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/session_buffer.hpp"
 #include "tests/support/layouts.hpp"
@@ -67,6 +69,39 @@ std::vector<MarkerModel> outputModels(const CompletionConfig& config) {
     for (std::size_t i = 0; i < config.maxModels; ++i)
         out.emplace_back(config.maxMarkersPerModel);
     return out;
+}
+
+// A piece of a layout, turned, moved and listed in another order, lands on the layout with
+// every one of its markers, and in no other placement with as many.
+TEST(LayoutRegistration, PlacesAPieceOnItsLayoutWhateverTheOrderOfMarkers) {
+    const std::vector<Vec3> whole = test::irregularLayout(14, 21, 15.0);
+    RigidTransform moved;
+    moved.rotation = Quat(Eigen::AngleAxisd(0.7, Vec3(0.2, 0.5, 1.0).normalized()));
+    moved.translation_mm = Vec3(30.0, -12.0, 250.0);
+    const std::array<std::size_t, 5> taken{11, 3, 8, 0, 6};
+    std::vector<Vec3> piece;
+    for (const std::size_t m : taken)
+        piece.push_back(moved.apply(whole[m]));
+    const completion_detail::Registration r =
+        completion_detail::registerLayout(piece, whole, 2.0, 0.5);
+    EXPECT_EQ(r.matched, 5U);
+    EXPECT_LT(r.runnerUp, 5U);
+    for (std::size_t i = 0; i < piece.size(); ++i)
+        EXPECT_LT((r.wholeFromPart.apply(piece[i]) - whole[taken[i]]).norm(), 1e-6);
+}
+
+// A piece of a regular layout (a row of squares) fits it in several places: registration says
+// so, and the join step then does not take it.
+TEST(LayoutRegistration, SaysWhenASelfSimilarLayoutTakesAPieceInSeveralPlaces) {
+    std::vector<Vec3> grid;
+    for (int row = 0; row < 2; ++row)
+        for (int column = 0; column < 4; ++column)
+            grid.push_back(Vec3(30.0 * column, 30.0 * row, 0.0));
+    const std::vector<Vec3> square{grid[0], grid[1], grid[4], grid[5]};
+    const completion_detail::Registration r =
+        completion_detail::registerLayout(square, grid, 2.0, 0.5);
+    EXPECT_EQ(r.matched, 4U);
+    EXPECT_EQ(r.runnerUp, 4U);
 }
 
 TEST(SessionBuffer, KeepsEachFrameInOneOrderAndRefusesWhatDoesNotFit) {

@@ -1,0 +1,381 @@
+// Completion, join step: pieces of one body found as one by motion, by layout or by handover.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+#include <optional>
+
+#include "core/calibration_completion.hpp"
+#include "core/completion_geometry.hpp"
+#include "core/marker_set.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+using namespace completion_detail;
+
+namespace {
+
+/// Relative poses tried as the consensus of two objects' motion.
+constexpr std::size_t kConsensusCandidates = 32;
+/// A body's pose is carried on across at most this many frames without either piece.
+constexpr std::size_t kHandoverGap_frames = 10;
+/// Frames over which a piece's speed and turn rate are measured before it leaves.
+constexpr std::size_t kSpeedBaseline_frames = 3;
+/// Handovers that must agree before two pieces that are never seen together are joined.
+constexpr std::size_t kMinHandovers = 3;
+/// Two models' markers are the same marker when one model registered onto the other puts them
+/// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
+/// four markers of one random layout already land on four of another by chance.
+constexpr double kRegistrationTolerance_mm = 0.5;
+
+} // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Joining the pieces of one body
+
+bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
+    bool joined = false;
+    const std::size_t frames = session.frames();
+    std::size_t alive = 0;
+    for (std::size_t b = 0; b < bodies_.size(); ++b)
+        alive += bodies_[b].alive ? 1u : 0u;
+    if (alive < 2)
+        return false;
+    // Each body tracked alone, with S_min as the joint tracker has it: the bodies that are alive
+    // come first (trackAll sorted them), so their models are those of the joint tracking.
+    // Tracked alone only when a pair needs it: most pairs are told apart by the joint tracking,
+    // and each lone pass costs as much as the joint one.
+    const std::vector<MarkerModel> models = trackingModels(alive);
+    std::vector<char> trackedAlone(alive, 0);
+    auto trackAlone = [&](std::size_t b) {
+        if (trackedAlone[b])
+            return;
+        trackedAlone[b] = 1;
+        std::vector<MarkerModel> alone;
+        alone.emplace_back(config_.maxMarkersPerModel).assign(models[b]);
+        alone.back().id = 0;
+        const PoseTrack track{&bodies_[b].posedAlone, &bodies_[b].T_rig_from_body_alone};
+        trackBothWays(session, alone, std::span(&track, 1));
+    };
+    std::vector<RigidTransform> relative;
+    std::vector<std::size_t> sharedFrames;
+    for (std::size_t a = 0; a < bodies_.size(); ++a) {
+        for (std::size_t b = a + 1; b < bodies_.size(); ++b) {
+            Body& into = bodies_[a];
+            Body& from = bodies_[b];
+            if (!into.alive || !from.alive)
+                continue;
+            const Extent ball = extentOf(from.markers_mm);
+            // b's frame to a's in every frame both were found (jointly, or each alone), and the
+            // relative pose most of them agree with: one body keeps one relative pose.
+            struct Consensus {
+                std::size_t shared = 0;
+                std::optional<RigidTransform> intoFromFrom;
+            };
+            auto consensus = [&](bool alone) {
+                Consensus c;
+                relative.clear();
+                sharedFrames.clear();
+                for (std::size_t f = 0; f < frames; ++f) {
+                    if (alone ? into.posedAlone[f] && from.posedAlone[f]
+                              : into.posed[f] && from.posed[f]) {
+                        relative.push_back(alone ? into.T_rig_from_body_alone[f].inverse() *
+                                                       from.T_rig_from_body_alone[f]
+                                                 : into.T_rig_from_body[f].inverse() *
+                                                       from.T_rig_from_body[f]);
+                        sharedFrames.push_back(f);
+                    }
+                }
+                c.shared = relative.size();
+                if (c.shared < config_.minSharedFrames)
+                    return c;
+                // The relative pose most frames come near is only a start: a pose from three or
+                // four markers turns by a degree or two, which moves a far marker by millimetres.
+                // The judgement is the fit of both layouts as one to every shared frame's points.
+                std::size_t bestAgree = 0;
+                std::size_t bestCandidate = 0;
+                const std::size_t step =
+                    std::max<std::size_t>(1, relative.size() / kConsensusCandidates);
+                for (std::size_t k = 0; k < relative.size(); k += step) {
+                    std::size_t agree = 0;
+                    for (const RigidTransform& r : relative)
+                        if (disagreement_mm(r, relative[k], ball) <= config_.sameBodyTolerance_mm)
+                            ++agree;
+                    if (agree > bestAgree) {
+                        bestAgree = agree;
+                        bestCandidate = k;
+                    }
+                }
+                // Most frames must come near one relative pose at all: a piece of a self-similar
+                // layout found alone on the other's points fits there too, but by a relative pose
+                // that changes from frame to frame.
+                if (2 * bestAgree < c.shared)
+                    return c;
+                const OneBodyFit fit =
+                    fitAsOneBody(session, sharedFrames, into, from, alone, relative[bestCandidate]);
+                if (static_cast<double>(fit.framesFitting) >=
+                    config_.sameBodyShare * static_cast<double>(c.shared))
+                    c.intoFromFrom = fit.intoFromFrom;
+                return c;
+            };
+            // Found together often by the joint tracker, they are one body only if they move as
+            // one; two alike objects would each be found alone on the same points.
+            const Consensus joint = consensus(false);
+            std::optional<RigidTransform> intoFromFrom = joint.intoFromFrom;
+            bool byLayout = false;
+            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
+                // Seldom found at once jointly: pieces that share markers, whose shared points the
+                // joint tracker gives to one of them. Each found alone, they move as one.
+                trackAlone(a);
+                trackAlone(b);
+                intoFromFrom = consensus(true).intoFromFrom;
+                if (!intoFromFrom) {
+                    // One may be a piece of the other that the tracker gave the other's points to,
+                    // or the two may share markers but never be in view together. Four or more
+                    // markers in one place of the other's layout tie them, unless a self-similar
+                    // layout lets them lie as well in another place.
+                    const Registration r =
+                        registerLayout(from.markers_mm, into.markers_mm,
+                                       config_.sameBodyTolerance_mm, kRegistrationTolerance_mm);
+                    if (r.matched >= 4 && r.matched > r.runnerUp) {
+                        intoFromFrom = r.wholeFromPart;
+                        byLayout = true;
+                    }
+                }
+            }
+            if (intoFromFrom)
+                ++(byLayout ? counters_.joinedByLayout : counters_.joinedByMotion);
+            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
+                // Never in view together: one piece of a turning body may come into view just as
+                // the other leaves. The pose of the one, carried on at its speed, then lands on
+                // the other's pose by one relative pose, every time it happens.
+                intoFromFrom = relativePoseAcrossHandovers(session, into, from);
+                if (intoFromFrom)
+                    ++counters_.joinedByHandover;
+            }
+            if (!intoFromFrom)
+                continue;
+            const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+            for (const Vec3& m : from.markers_mm) {
+                const Vec3 moved = intoFromFrom->apply(m);
+                const bool known =
+                    std::any_of(into.markers_mm.begin(), into.markers_mm.end(), [&](const Vec3& n) {
+                        return (n - moved).squaredNorm() < spacing2;
+                    });
+                if (known)
+                    continue;
+                if (into.markers_mm.size() == config_.maxMarkersPerModel) {
+                    ++counters_.markerOverflow;
+                    break;
+                }
+                into.markers_mm.push_back(moved);
+            }
+            // Its co-visibility is measured again from the poses.
+            into.edges.clear();
+            const RigidTransform fromFromInto = intoFromFrom->inverse();
+            for (std::size_t f = 0; f < frames; ++f)
+                if (!into.posed[f] && from.posed[f]) {
+                    into.posed[f] = 1;
+                    into.T_rig_from_body[f] = from.T_rig_from_body[f] * fromFromInto;
+                }
+            from.alive = false;
+            joined = true;
+        }
+    }
+    return joined;
+}
+
+CalibrationCompletion::OneBodyFit
+CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
+                                    std::span<const std::size_t> sharedFrames, const Body& a,
+                                    const Body& b, bool alone, const RigidTransform& aFromB) const {
+    OneBodyFit result;
+    result.intoFromFrom = aFromB;
+    const auto& posesA = alone ? a.T_rig_from_body_alone : a.T_rig_from_body;
+    const auto& posesB = alone ? b.T_rig_from_body_alone : b.T_rig_from_body;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+    const std::size_t nA = a.markers_mm.size();
+    const std::size_t nB = b.markers_mm.size();
+    std::vector<Vec3> layout_a_mm(nA + nB);
+    // b's markers that are a's too (under aFromB): the index of a's, or -1 for b's own.
+    std::vector<std::int32_t> sameAs(nB);
+    std::vector<Vec3> from, to, sums(nB);
+    std::vector<std::size_t> which, ownAt;
+    std::vector<std::uint32_t> counts(nB);
+    std::vector<const Vec3*> matchedA(nA);
+    auto nearest = [&](std::span<const Vec3> points, const Vec3& there) -> const Vec3* {
+        double best2 = radius * radius;
+        const Vec3* match = nullptr;
+        for (const Vec3& p : points) {
+            const double d2 = (p - there).squaredNorm();
+            if (d2 <= best2) {
+                best2 = d2;
+                match = &p;
+            }
+        }
+        return match;
+    };
+    // Alternating least squares, as refine() does for one body: the union fitted to each frame,
+    // then b's markers placed in a's frame by those fits.
+    constexpr int kIterations = 3;
+    for (int iteration = 0; iteration < kIterations; ++iteration) {
+        for (std::size_t k = 0; k < nA; ++k)
+            layout_a_mm[k] = a.markers_mm[k];
+        for (std::size_t k = 0; k < nB; ++k) {
+            layout_a_mm[nA + k] = result.intoFromFrom.apply(b.markers_mm[k]);
+            sameAs[k] = -1;
+            for (std::size_t m = 0; m < nA; ++m)
+                if ((a.markers_mm[m] - layout_a_mm[nA + k]).squaredNorm() < spacing2)
+                    sameAs[k] = static_cast<std::int32_t>(m);
+        }
+        std::fill(sums.begin(), sums.end(), Vec3::Zero());
+        std::fill(counts.begin(), counts.end(), 0U);
+        result.framesFitting = 0;
+        for (const std::size_t f : sharedFrames) {
+            const std::span<const Vec3> points = session.points(f);
+            from.clear();
+            to.clear();
+            which.clear();
+            ownAt.clear();
+            for (std::size_t k = 0; k < nA; ++k) {
+                matchedA[k] = nearest(points, posesA[f].apply(a.markers_mm[k]));
+                if (matchedA[k]) {
+                    from.push_back(layout_a_mm[k]);
+                    to.push_back(*matchedA[k]);
+                }
+            }
+            const std::size_t ofA = from.size();
+            // b's markers where b's pose puts them: its own join the fit, a shared one must be
+            // the point a's pose found for it.
+            std::size_t ofB = 0;
+            bool consistent = true;
+            for (std::size_t k = 0; k < nB && consistent; ++k) {
+                const Vec3* p = nearest(points, posesB[f].apply(b.markers_mm[k]));
+                if (!p)
+                    continue;
+                if (sameAs[k] >= 0) {
+                    const Vec3* pa = matchedA[static_cast<std::size_t>(sameAs[k])];
+                    if (pa && pa != p)
+                        consistent = false;
+                    if (!pa) {
+                        from.push_back(a.markers_mm[static_cast<std::size_t>(sameAs[k])]);
+                        to.push_back(*p);
+                    }
+                    ++ofB;
+                    continue;
+                }
+                if (std::any_of(matchedA.begin(), matchedA.end(),
+                                [p](const Vec3* q) { return q == p; })) {
+                    consistent = false; // a point of one of a's markers, not where b's own is
+                    continue;
+                }
+                which.push_back(k);
+                ownAt.push_back(from.size());
+                from.push_back(layout_a_mm[nA + k]);
+                to.push_back(*p);
+                ++ofB;
+            }
+            if (!consistent || ofA < 2 || ofB < 2)
+                continue;
+            const std::optional<RigidFit> fit = fitRigid(from, to);
+            if (!fit)
+                continue;
+            bool fits = true;
+            for (std::size_t i = 0; i < from.size() && fits; ++i)
+                fits =
+                    (fit->transform.apply(from[i]) - to[i]).norm() <= config_.sameBodyTolerance_mm;
+            if (!fits)
+                continue;
+            ++result.framesFitting;
+            const RigidTransform aFromRig = fit->transform.inverse();
+            for (std::size_t i = 0; i < which.size(); ++i) {
+                sums[which[i]] += aFromRig.apply(to[ownAt[i]]);
+                ++counts[which[i]];
+            }
+        }
+        // b's own markers, and its shared ones where a has them, place b in a's frame.
+        from.clear();
+        to.clear();
+        for (std::size_t k = 0; k < nB; ++k) {
+            if (counts[k] > 0) {
+                from.push_back(b.markers_mm[k]);
+                to.push_back(sums[k] / static_cast<double>(counts[k]));
+            } else if (sameAs[k] >= 0) {
+                from.push_back(b.markers_mm[k]);
+                to.push_back(a.markers_mm[static_cast<std::size_t>(sameAs[k])]);
+            }
+        }
+        const std::optional<RigidFit> placed = fitRigid(from, to);
+        if (!placed || iteration + 1 == kIterations)
+            break;
+        result.intoFromFrom = placed->transform;
+    }
+    return result;
+}
+
+std::optional<RigidTransform>
+CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session, const Body& a,
+                                                   const Body& b) const {
+    const std::size_t frames = session.frames();
+    const Extent ballA = extentOf(a.markers_mm);
+    const Extent ballB = extentOf(b.markers_mm);
+    std::vector<RigidTransform> estimates; // b's frame to a's
+    // The first pose of one body's stretch, and the other's last poses just before it.
+    auto handover = [&](const Body& first, const Body& second, const Extent& firstBall,
+                        bool firstIsA) {
+        for (std::size_t f = 1; f < frames; ++f) {
+            if (!second.posedAlone[f] || second.posedAlone[f - 1] || first.posedAlone[f])
+                continue;
+            std::size_t end = f; // the earlier body's last posed frame before f
+            for (std::size_t back = 1; back <= kHandoverGap_frames && back <= f; ++back)
+                if (first.posedAlone[f - back]) {
+                    end = f - back;
+                    break;
+                }
+            if (end == f || end < kSpeedBaseline_frames)
+                continue;
+            const std::size_t start = end - kSpeedBaseline_frames;
+            bool steady = true;
+            for (std::size_t g = start; g <= end; ++g)
+                steady = steady && first.posedAlone[g] != 0;
+            if (!steady)
+                continue;
+            const RigidTransform carried =
+                extrapolate(first.T_rig_from_body_alone[start], session.time_s(start),
+                            first.T_rig_from_body_alone[end], session.time_s(end),
+                            session.time_s(f), firstBall.centre);
+            const RigidTransform firstFromSecond =
+                carried.inverse() * second.T_rig_from_body_alone[f];
+            estimates.push_back(firstIsA ? firstFromSecond : firstFromSecond.inverse());
+        }
+    };
+    handover(a, b, ballA, true);
+    handover(b, a, ballB, false);
+    if (estimates.size() < kMinHandovers)
+        return std::nullopt;
+    std::size_t bestAgree = 0, best = 0;
+    for (std::size_t c = 0; c < estimates.size(); ++c) {
+        std::size_t agree = 0;
+        for (const RigidTransform& e : estimates)
+            if (disagreement_mm(e, estimates[c], ballB) <= config_.handoverTolerance_mm)
+                ++agree;
+        if (agree > bestAgree) {
+            bestAgree = agree;
+            best = c;
+        }
+    }
+    if (bestAgree < kMinHandovers ||
+        static_cast<double>(bestAgree) <
+            config_.sameBodyShare * static_cast<double>(estimates.size()))
+        return std::nullopt;
+    std::vector<RigidTransform> agreeing;
+    for (const RigidTransform& e : estimates)
+        if (disagreement_mm(e, estimates[best], ballB) <= config_.handoverTolerance_mm)
+            agreeing.push_back(e);
+    return meanTransform(agreeing, ballB);
+}
+
+} // namespace edgetrack

@@ -1,0 +1,299 @@
+// Completion, measure step: a body's markers from every frame it was found in, then least squares.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <numbers>
+#include <numeric>
+#include <optional>
+
+#include "core/calibration_completion.hpp"
+#include "core/completion_geometry.hpp"
+#include "core/marker_set.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+using namespace completion_detail;
+
+namespace {
+
+constexpr double kDegree = std::numbers::pi / 180.0;
+/// Directions a place was seen from that are kept (thinned to half the same-view angle).
+constexpr std::size_t kMaxViewDirections = 256;
+
+} // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Measuring a body's markers from every frame it was found in
+
+std::size_t CalibrationCompletion::cellOf(const Vec3& q_mm) const {
+    const double cell = 2.0 * config_.siteRadius_mm;
+    const auto ix = static_cast<std::int64_t>(std::floor(q_mm.x() / cell));
+    const auto iy = static_cast<std::int64_t>(std::floor(q_mm.y() / cell));
+    const auto iz = static_cast<std::int64_t>(std::floor(q_mm.z() / cell));
+    const auto h = static_cast<std::uint64_t>(ix * 73856093 ^ iy * 19349663 ^ iz * 83492791);
+    return static_cast<std::size_t>(h & (kSiteCells - 1));
+}
+
+std::int32_t CalibrationCompletion::siteNear(const Vec3& q_mm) const {
+    const double cell = 2.0 * config_.siteRadius_mm;
+    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    std::int32_t best = -1;
+    double bestDistance2 = radius2;
+    for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dz = -1; dz <= 1; ++dz) {
+                const Vec3 probe = q_mm + cell * Vec3(dx, dy, dz);
+                for (std::int32_t s = cellHead_[cellOf(probe)]; s >= 0;
+                     s = sites_[static_cast<std::size_t>(s)].next) {
+                    const Site& site = sites_[static_cast<std::size_t>(s)];
+                    const double d2 =
+                        (site.sum_mm / static_cast<double>(site.hits) - q_mm).squaredNorm();
+                    if (d2 <= bestDistance2) {
+                        bestDistance2 = d2;
+                        best = s;
+                    }
+                }
+            }
+    return best;
+}
+
+std::int32_t CalibrationCompletion::addSite(const Vec3& q_mm) {
+    if (sites_.size() == config_.maxSites) {
+        ++counters_.siteOverflow;
+        return -1;
+    }
+    const std::size_t cell = cellOf(q_mm);
+    Site& site = sites_.emplace_back();
+    site.sum_mm = q_mm;
+    site.hits = 1;
+    site.next = cellHead_[cell];
+    cellHead_[cell] = static_cast<std::int32_t>(sites_.size() - 1);
+    return cellHead_[cell];
+}
+
+bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
+    const std::size_t frames = session.frames();
+    sites_.clear();
+    std::fill(cellHead_.begin(), cellHead_.end(), -1);
+
+    const Extent extent = extentOf(body.markers_mm);
+    const double reach = extent.radius_mm + config_.reach_mm;
+    const double reach2 = reach * reach;
+    for (std::size_t f = 0; f < frames; ++f) {
+        if (!body.posed[f])
+            continue;
+        const RigidTransform bodyFromRig = body.T_rig_from_body[f].inverse();
+        for (const Vec3& p : session.points(f)) {
+            const Vec3 q = bodyFromRig.apply(p);
+            if ((q - extent.centre).squaredNorm() > reach2)
+                continue;
+            std::int32_t s = siteNear(q);
+            if (s < 0) {
+                s = addSite(q);
+                if (s < 0)
+                    continue;
+                Site& fresh = sites_[static_cast<std::size_t>(s)];
+                fresh.lastFrame = static_cast<std::uint32_t>(f);
+                continue;
+            }
+            Site& site = sites_[static_cast<std::size_t>(s)];
+            if (site.lastFrame == f)
+                continue;
+            site.lastFrame = static_cast<std::uint32_t>(f);
+            ++site.hits;
+            site.sum_mm += q;
+        }
+    }
+
+    // Places seen long enough, strongest first; of two closer than a marker's size, the stronger.
+    const auto minHits = static_cast<std::uint32_t>(std::ceil(config_.minSeen_s * frameRate_hz_));
+    std::vector<std::size_t> candidates;
+    for (std::size_t s = 0; s < sites_.size(); ++s)
+        if (sites_[s].hits >= std::max<std::uint32_t>(minHits, 2))
+            candidates.push_back(s);
+    std::sort(candidates.begin(), candidates.end(), [&](std::size_t a, std::size_t b) {
+        if (sites_[a].hits != sites_[b].hits)
+            return sites_[a].hits > sites_[b].hits;
+        return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
+    });
+    std::vector<Vec3> place;
+    const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+    for (const std::size_t s : candidates) {
+        const Vec3 mean = sites_[s].sum_mm / static_cast<double>(sites_[s].hits);
+        const bool near = std::any_of(place.begin(), place.end(), [&](const Vec3& p) {
+            return (p - mean).squaredNorm() < spacing2;
+        });
+        if (near)
+            continue;
+        if (place.size() == 2 * config_.maxMarkersPerModel) {
+            ++counters_.markerOverflow;
+            break;
+        }
+        place.push_back(mean);
+    }
+
+    // Seen again whenever the cameras look at it as they once saw it? First the directions each
+    // place was seen from (body frame, thinned), then, in every frame, whether the cameras look
+    // from one of them and it is there.
+    const std::size_t n = place.size();
+    std::vector<std::uint32_t> expected(n, 0), seenWhenExpected(n, 0), seen(n, 0);
+    std::vector<std::uint32_t> together(n * n, 0);
+    std::vector<std::vector<Vec3>> seenFrom(n);
+    std::vector<std::uint8_t> hit(n);
+    std::vector<std::size_t> hitNow;
+    const double sameView = std::cos(config_.sameViewAngle_deg * kDegree);
+    const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
+    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!body.posed[f])
+                continue;
+            const RigidTransform& rigFromBody = body.T_rig_from_body[f];
+            const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+            const std::span<const Vec3> points = session.points(f);
+            hitNow.clear();
+            for (std::size_t k = 0; k < n; ++k) {
+                const Vec3 there = rigFromBody.apply(place[k]);
+                const bool isHit = std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
+                    return (p - there).squaredNorm() <= radius2;
+                });
+                const Vec3 view = (viewpoint - place[k]).normalized();
+                std::vector<Vec3>& directions = seenFrom[k];
+                if (pass == 0) {
+                    if (!isHit)
+                        continue;
+                    ++seen[k];
+                    hitNow.push_back(k);
+                    const bool known =
+                        std::any_of(directions.begin(), directions.end(),
+                                    [&](const Vec3& d) { return d.dot(view) >= thinning; });
+                    if (!known && directions.size() < kMaxViewDirections)
+                        directions.push_back(view);
+                    continue;
+                }
+                const bool seenFromHere =
+                    std::any_of(directions.begin(), directions.end(),
+                                [&](const Vec3& d) { return d.dot(view) >= sameView; });
+                if (seenFromHere) {
+                    ++expected[k];
+                    seenWhenExpected[k] += isHit ? 1U : 0U;
+                }
+            }
+            for (std::size_t i = 0; i < hitNow.size(); ++i)
+                for (std::size_t j = i + 1; j < hitNow.size(); ++j)
+                    ++together[hitNow[i] * n + hitNow[j]];
+        }
+    }
+    std::vector<std::size_t> accepted;
+    for (std::size_t k = 0; k < n; ++k) {
+        if (seen[k] < minHits)
+            continue;
+        if (expected[k] > 0 && static_cast<double>(seenWhenExpected[k]) <
+                                   config_.minSeenShare * static_cast<double>(expected[k]))
+            continue;
+        if (accepted.size() == config_.maxMarkersPerModel) {
+            ++counters_.markerOverflow;
+            break;
+        }
+        accepted.push_back(k);
+    }
+
+    std::vector<Vec3> markers;
+    for (const std::size_t k : accepted)
+        markers.push_back(place[k]);
+    auto covered = [](std::span<const Vec3> set, const Vec3& p) {
+        return std::any_of(set.begin(), set.end(),
+                           [&](const Vec3& q) { return (q - p).squaredNorm() < 0.25; });
+    };
+    std::size_t added = 0, removed = 0;
+    for (const Vec3& m : markers)
+        added += covered(body.markers_mm, m) ? 0U : 1U;
+    for (const Vec3& m : body.markers_mm)
+        removed += covered(markers, m) ? 0U : 1U;
+    counters_.markersAdded += added;
+    counters_.markersRemoved += removed;
+    body.markers_mm = std::move(markers);
+    body.edges.clear();
+    for (std::size_t a = 0; a < accepted.size(); ++a)
+        for (std::size_t b = a + 1; b < accepted.size(); ++b) {
+            const std::size_t i = std::min(accepted[a], accepted[b]);
+            const std::size_t j = std::max(accepted[a], accepted[b]);
+            if (together[i * n + j] >= 2)
+                body.edges.emplace_back(static_cast<std::uint16_t>(a),
+                                        static_cast<std::uint16_t>(b));
+        }
+    return added > 0 || removed > 0;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Least squares over every pose
+
+void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
+    const std::size_t frames = session.frames();
+    const std::size_t n = body.markers_mm.size();
+    if (n < 3)
+        return;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    std::vector<Vec3> sums(n);
+    std::vector<std::uint32_t> counts(n);
+    std::vector<std::uint32_t> together(n * n, 0);
+    std::vector<Vec3> from, to;
+    std::vector<std::size_t> which;
+    for (int iteration = 0; iteration < config_.refineIterations; ++iteration) {
+        const bool last = iteration + 1 == config_.refineIterations;
+        std::fill(sums.begin(), sums.end(), Vec3::Zero());
+        std::fill(counts.begin(), counts.end(), 0U);
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!body.posed[f])
+                continue;
+            const std::span<const Vec3> points = session.points(f);
+            from.clear();
+            to.clear();
+            which.clear();
+            for (std::size_t k = 0; k < n; ++k) {
+                const Vec3 there = body.T_rig_from_body[f].apply(body.markers_mm[k]);
+                double best2 = radius * radius;
+                const Vec3* match = nullptr;
+                for (const Vec3& p : points) {
+                    const double d2 = (p - there).squaredNorm();
+                    if (d2 <= best2) {
+                        best2 = d2;
+                        match = &p;
+                    }
+                }
+                if (match) {
+                    from.push_back(body.markers_mm[k]);
+                    to.push_back(*match);
+                    which.push_back(k);
+                }
+            }
+            const std::optional<RigidFit> fit = fitRigid(from, to);
+            if (!fit || fit->rms_mm > config_.tracking.maxRms_mm) {
+                body.posed[f] = 0;
+                continue;
+            }
+            body.T_rig_from_body[f] = fit->transform;
+            const RigidTransform bodyFromRig = fit->transform.inverse();
+            for (std::size_t i = 0; i < which.size(); ++i) {
+                sums[which[i]] += bodyFromRig.apply(to[i]);
+                ++counts[which[i]];
+            }
+            if (last)
+                for (std::size_t i = 0; i < which.size(); ++i)
+                    for (std::size_t j = i + 1; j < which.size(); ++j)
+                        ++together[which[i] * n + which[j]];
+        }
+        for (std::size_t k = 0; k < n; ++k)
+            if (counts[k] > 0)
+                body.markers_mm[k] = sums[k] / static_cast<double>(counts[k]);
+    }
+    body.edges.clear();
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + 1; j < n; ++j)
+            if (together[i * n + j] >= 2)
+                body.edges.emplace_back(static_cast<std::uint16_t>(i),
+                                        static_cast<std::uint16_t>(j));
+}
+
+} // namespace edgetrack

@@ -1,0 +1,177 @@
+// Geometry the completion steps share: extents, transform agreement, layout registration.
+#include "core/completion_geometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack::completion_detail {
+
+namespace {
+
+/// Congruent triangle pairs a registration tries at most: a self-similar layout (a sphere of many
+/// markers) has thousands, and the first few hundred already show that it registers several ways.
+constexpr std::size_t kRegistrationCandidates = 20000;
+
+} // namespace
+
+Extent extentOf(std::span<const Vec3> markers_mm) {
+    Extent e;
+    if (markers_mm.empty())
+        return e;
+    for (const Vec3& m : markers_mm)
+        e.centre += m;
+    e.centre /= static_cast<double>(markers_mm.size());
+    for (const Vec3& m : markers_mm)
+        e.radius_mm = std::max(e.radius_mm, (m - e.centre).norm());
+    return e;
+}
+
+double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball) {
+    return (a.apply(ball.centre) - b.apply(ball.centre)).norm() +
+           ball.radius_mm * rotationAngleBetween_rad(a.rotation, b.rotation);
+}
+
+RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball) {
+    Eigen::Vector4d q = Eigen::Vector4d::Zero();
+    Vec3 centre = Vec3::Zero();
+    const Quat& reference = transforms.front().rotation;
+    for (const RigidTransform& t : transforms) {
+        Eigen::Vector4d c = t.rotation.coeffs();
+        if (c.dot(reference.coeffs()) < 0.0)
+            c = -c;
+        q += c;
+        centre += t.apply(ball.centre);
+    }
+    RigidTransform mean;
+    mean.rotation = Quat(q.normalized());
+    centre /= static_cast<double>(transforms.size());
+    mean.translation_mm = centre - mean.rotation * ball.centre;
+    return mean;
+}
+
+Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
+                            double tolerance_mm, double matchTolerance_mm) {
+    Registration best;
+    const std::size_t n = part.size();
+    const std::size_t m = whole.size();
+    if (n < 3 || m < 3)
+        return best;
+    const double tol2 = matchTolerance_mm * matchTolerance_mm;
+    std::vector<Vec3> from, to;
+    std::vector<std::uint32_t> onto(n);
+    constexpr std::uint32_t kNone = ~0U;
+    auto matchOn = [&](const RigidTransform& t) {
+        from.clear();
+        to.clear();
+        for (std::size_t i = 0; i < n; ++i) {
+            const Vec3 moved = t.apply(part[i]);
+            onto[i] = kNone;
+            for (std::uint32_t w = 0; w < m; ++w)
+                if ((moved - whole[w]).squaredNorm() <= tol2) {
+                    from.push_back(part[i]);
+                    to.push_back(whole[w]);
+                    onto[i] = w;
+                    break;
+                }
+        }
+        return from.size();
+    };
+    // The whole's pairs by distance, so that each side of a part's triangle finds its
+    // counterparts by a binary search rather than by trying every pair.
+    struct Pair {
+        double d_mm;
+        std::uint32_t x, y;
+    };
+    std::vector<Pair> pairs;
+    pairs.reserve(m * (m - 1));
+    for (std::uint32_t x = 0; x < m; ++x)
+        for (std::uint32_t y = 0; y < m; ++y)
+            if (x != y)
+                pairs.push_back({(whole[x] - whole[y]).norm(), x, y});
+    std::sort(pairs.begin(), pairs.end(),
+              [](const Pair& l, const Pair& r) { return l.d_mm < r.d_mm; });
+    auto near = [&](double d_mm) {
+        const auto lo = std::lower_bound(pairs.begin(), pairs.end(), d_mm - tolerance_mm,
+                                         [](const Pair& p, double v) { return p.d_mm < v; });
+        const auto hi = std::upper_bound(lo, pairs.end(), d_mm + tolerance_mm,
+                                         [](double v, const Pair& p) { return v < p.d_mm; });
+        return std::span<const Pair>(lo, hi);
+    };
+    // Each registration found, as which part marker lies on which whole one.
+    std::vector<std::vector<std::uint32_t>> found;
+    std::vector<std::uint32_t> bestOnto;
+    // Every well-spread triangle of the part against every congruent one of the whole: the
+    // answer must not depend on the order in which either layout lists its markers.
+    std::size_t candidates = 0;
+    for (std::size_t i = 0; i < n && candidates < kRegistrationCandidates; ++i)
+        for (std::size_t j = i + 1; j < n && candidates < kRegistrationCandidates; ++j) {
+            const std::span<const Pair> sidesAB = near((part[i] - part[j]).norm());
+            if (sidesAB.empty())
+                continue;
+            for (std::size_t k = j + 1; k < n; ++k) {
+                const Vec3 &a = part[i], &b = part[j], &c = part[k];
+                const double twiceArea = (b - a).cross(c - a).norm();
+                const double longest = std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
+                if (longest <= 0.0 || twiceArea / longest < 8.0)
+                    continue;
+                const double dac = (a - c).norm(), dbc = (b - c).norm();
+                for (const Pair& xy : sidesAB)
+                    for (std::uint32_t z = 0; z < m; ++z) {
+                        if (z == xy.x || z == xy.y ||
+                            std::abs((whole[xy.x] - whole[z]).norm() - dac) > tolerance_mm ||
+                            std::abs((whole[xy.y] - whole[z]).norm() - dbc) > tolerance_mm)
+                            continue;
+                        ++candidates;
+                        const Vec3 tri[3] = {a, b, c};
+                        const Vec3 target[3] = {whole[xy.x], whole[xy.y], whole[z]};
+                        const std::optional<RigidFit> seed = fitRigid(tri, target);
+                        if (!seed || matchOn(seed->transform) < 3)
+                            continue;
+                        // Every marker it matches, fitted at once, then matched again.
+                        const std::optional<RigidFit> all = fitRigid(from, to);
+                        const RigidTransform t = all ? all->transform : seed->transform;
+                        const std::size_t count = matchOn(t);
+                        if (std::find(found.begin(), found.end(), onto) == found.end())
+                            found.push_back(onto);
+                        if (count > best.matched) {
+                            best.matched = count;
+                            best.wholeFromPart = t;
+                            bestOnto = onto;
+                        }
+                    }
+            }
+        }
+    if (best.matched == 0)
+        return best;
+    // Another registration is one that shares fewer than three of the best's pairs: one that
+    // shares three is the same placement, matched a little differently.
+    for (const std::vector<std::uint32_t>& other : found) {
+        std::size_t count = 0, common = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+            count += other[i] != kNone ? 1U : 0U;
+            common += other[i] != kNone && other[i] == bestOnto[i] ? 1U : 0U;
+        }
+        if (common < 3)
+            best.runnerUp = std::max(best.runnerUp, count);
+    }
+    return best;
+}
+
+RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
+                           double t1_s, double t_s, const Vec3& centre_body) {
+    const double s = (t_s - t1_s) / (t1_s - t0_s);
+    const Vec3 c0 = at0.apply(centre_body), c1 = at1.apply(centre_body);
+    const Eigen::AngleAxisd turn(at1.rotation * at0.rotation.inverse());
+    RigidTransform out;
+    out.rotation = Quat(Eigen::AngleAxisd(turn.angle() * s, turn.axis())) * at1.rotation;
+    out.rotation.normalize();
+    out.translation_mm = c1 + s * (c1 - c0) - out.rotation * centre_body;
+    return out;
+}
+
+} // namespace edgetrack::completion_detail

@@ -1,0 +1,55 @@
+// Geometry the completion steps share: extents, transform agreement, layout registration.
+#pragma once
+
+#include <cstddef>
+#include <span>
+
+#include "core/rigid_transform.hpp"
+
+namespace edgetrack::completion_detail {
+
+/// Points within this many site radii of a marker's place are that marker when refining.
+constexpr double kRefineRadiusFactor = 1.5;
+
+/// A ball that holds a layout (body frame, mm).
+struct Extent {
+    Vec3 centre = Vec3::Zero();
+    double radius_mm = 0.0;
+};
+
+/// The centroid of \a markers_mm and the distance of the farthest from it.
+Extent extentOf(std::span<const Vec3> markers_mm);
+
+/// How far apart two transforms put the points of a ball (centre, radius): an upper bound (mm).
+double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball);
+
+/// The mean of transforms that agree closely: mean rotation (sign-aligned quaternions) about the
+/// ball's centre, and the mean place of that centre.
+RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball);
+
+/// The placement of one layout in another: which transform, how many markers it puts onto the
+/// other's, and how many the best different placement puts there.
+struct Registration {
+    RigidTransform wholeFromPart;
+    std::size_t matched = 0;
+    std::size_t runnerUp = 0;
+};
+
+/**
+ * \brief The transform that puts the most markers of \a part onto markers of \a whole.
+ *
+ * Every well-spread triangle of \a part is tried on every triangle of \a whole whose sides agree
+ * within \a tolerance_mm; each placement is refitted on all the markers it puts within
+ * \a matchTolerance_mm of one. A placement that shares fewer than three of the best's pairs is a
+ * different one: its count is Registration::runnerUp (a self-similar layout registers in several
+ * ways). Independent of the order of either layout's markers.
+ */
+Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
+                            double tolerance_mm, double matchTolerance_mm);
+
+/// \a body's pose at \a t_s carried on from its poses at \a t0_s and \a t1_s (t0 < t1): its
+/// centre \a centre_body (body frame) moves on at its speed, and it turns on at its turn rate.
+RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
+                           double t1_s, double t_s, const Vec3& centre_body);
+
+} // namespace edgetrack::completion_detail
