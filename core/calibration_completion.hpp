@@ -23,10 +23,10 @@ struct CompletionConfig {
     /// Models and markers per model it works with (more are refused and counted).
     std::size_t maxModels = 16;
     std::size_t maxMarkersPerModel = 96;
-    /// Points of one place in an object's frame: within this of its mean (mm). 1.5 mm leaves two
-    /// of the Vicon box's eight markers out (a 500 mm box placed by a fit of all its markers puts
-    /// them 1-2 mm about their place); 2 mm takes them but lets wrong poses of cube_sphere's
-    /// self-similar sphere leave false markers (seed 7). A known defect (docs).
+    /// Points of one place in an object's frame: within this of its mean (mm), or within three
+    /// times the median distance of the object's points from its markers where they scatter
+    /// more (a 500 mm box placed by a fit of all its markers puts them 1-2 mm about their place),
+    /// but never more than half of minMarkerSpacing_mm.
     double siteRadius_mm = 1.5;
     /// A place becomes a marker when a point sat there, the object posed, this long (s)...
     double minSeen_s = 0.3;
@@ -151,6 +151,8 @@ private:
         std::vector<RigidTransform> T_rig_from_body_alone;
         std::vector<std::uint8_t> posedAlone;
         bool alive = true;
+        /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
+        double placeRadius_mm = 0.0;
     };
     struct Site {
         Vec3 sum_mm = Vec3::Zero();
@@ -201,6 +203,9 @@ private:
     /// with, if there were enough.
     std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,
                                                               const Body& a, const Body& b) const;
+    /// The place radius for \a body: three times the median distance of the points near its
+    /// markers from them, within [siteRadius_mm, minMarkerSpacing_mm / 2].
+    double placeRadiusOf(const SessionBuffer& session, const Body& body) const;
     bool measure(const SessionBuffer& session, Body& body);
     void refine(const SessionBuffer& session, Body& body);
     void countEdges(const SessionBuffer& session, Body& body);
@@ -215,6 +220,8 @@ private:
     std::vector<Body> bodies_;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
+    /// The place radius of the body being measured (mm).
+    double placeRadius_mm_ = 1.5;
     /// Places hashed by the cell of their position: the first place of each of kSiteCells cells.
     static constexpr std::size_t kSiteCells = std::size_t{1} << 16;
     std::vector<std::int32_t> cellHead_;

@@ -20,6 +20,10 @@ namespace {
 constexpr double kDegree = std::numbers::pi / 180.0;
 /// Directions a place was seen from that are kept (thinned to half the same-view angle).
 constexpr std::size_t kMaxViewDirections = 256;
+/// A place holds points within this many times the median distance of an object's points from
+/// its markers: for a 3D normal scatter the median distance is 1.5 sigma, so 3 times it holds all
+/// but one point in a thousand.
+constexpr double kScatterFactor = 3.0;
 
 } // namespace
 
@@ -27,7 +31,7 @@ constexpr std::size_t kMaxViewDirections = 256;
 // Measuring a body's markers from every frame it was found in
 
 std::size_t CalibrationCompletion::cellOf(const Vec3& q_mm) const {
-    const double cell = 2.0 * config_.siteRadius_mm;
+    const double cell = 2.0 * placeRadius_mm_;
     const auto ix = static_cast<std::int64_t>(std::floor(q_mm.x() / cell));
     const auto iy = static_cast<std::int64_t>(std::floor(q_mm.y() / cell));
     const auto iz = static_cast<std::int64_t>(std::floor(q_mm.z() / cell));
@@ -36,8 +40,8 @@ std::size_t CalibrationCompletion::cellOf(const Vec3& q_mm) const {
 }
 
 std::int32_t CalibrationCompletion::siteNear(const Vec3& q_mm) const {
-    const double cell = 2.0 * config_.siteRadius_mm;
-    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    const double cell = 2.0 * placeRadius_mm_;
+    const double radius2 = placeRadius_mm_ * placeRadius_mm_;
     std::int32_t best = -1;
     double bestDistance2 = radius2;
     for (int dx = -1; dx <= 1; ++dx)
@@ -72,8 +76,35 @@ std::int32_t CalibrationCompletion::addSite(const Vec3& q_mm) {
     return cellHead_[cell];
 }
 
+double CalibrationCompletion::placeRadiusOf(const SessionBuffer& session, const Body& body) const {
+    const double widest = 0.5 * config_.minMarkerSpacing_mm;
+    const double lookWithin2 = 4.0 * widest * widest;
+    std::vector<double> distances;
+    for (std::size_t f = 0; f < session.frames(); ++f) {
+        if (!body.posed[f])
+            continue;
+        const std::span<const Vec3> points = session.points(f);
+        for (const Vec3& m : body.markers_mm) {
+            const Vec3 there = body.T_rig_from_body[f].apply(m);
+            double best2 = lookWithin2;
+            for (const Vec3& p : points)
+                best2 = std::min(best2, (p - there).squaredNorm());
+            if (best2 < lookWithin2)
+                distances.push_back(std::sqrt(best2));
+        }
+    }
+    if (distances.empty())
+        return config_.siteRadius_mm;
+    const auto middle = distances.begin() + static_cast<std::ptrdiff_t>(distances.size() / 2);
+    std::nth_element(distances.begin(), middle, distances.end());
+    return std::clamp(kScatterFactor * *middle, config_.siteRadius_mm,
+                      std::max(widest, config_.siteRadius_mm));
+}
+
 bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     const std::size_t frames = session.frames();
+    body.placeRadius_mm = placeRadiusOf(session, body);
+    placeRadius_mm_ = body.placeRadius_mm;
     sites_.clear();
     std::fill(cellHead_.begin(), cellHead_.end(), -1);
 
@@ -144,7 +175,7 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::vector<std::size_t> hitNow;
     const double sameView = std::cos(config_.sameViewAngle_deg * kDegree);
     const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
-    const double radius2 = config_.siteRadius_mm * config_.siteRadius_mm;
+    const double radius2 = placeRadius_mm_ * placeRadius_mm_;
     for (int pass = 0; pass < 2; ++pass) {
         for (std::size_t f = 0; f < frames; ++f) {
             if (!body.posed[f])
@@ -234,7 +265,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
     const std::size_t n = body.markers_mm.size();
     if (n < 3)
         return;
-    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    const double radius =
+        kRefineRadiusFactor * std::max(config_.siteRadius_mm, body.placeRadius_mm);
     std::vector<Vec3> sums(n);
     std::vector<std::uint32_t> counts(n);
     std::vector<std::uint32_t> together(n * n, 0);

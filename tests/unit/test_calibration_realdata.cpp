@@ -111,9 +111,10 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
 }
 
 // The whole calibration as `edgetrack calibrate` runs it (online stage, then completion), with
-// each frame's points in the file's order and in a shuffled one: one model holds the box
-// and no skin marker, and every order gives the same models. Completion keeps six of the box's
-// eight markers at its 1.5 mm site radius (the online stage all eight): a known defect.
+// each frame's points in the file's order and in a shuffled one: one model holds the box's eight
+// markers and no skin marker, and every order gives the same models. The box's markers scatter
+// 1-2 mm about their places, more than the 1.5 mm place radius the simulated markers need:
+// completion takes the radius from the scatter, or it keeps only six.
 TEST(CalibrationRealData, ViconBoxCompletedTheSameWhateverTheOrderOfPoints) {
     if (!std::filesystem::exists(kVicon))
         GTEST_SKIP() << kVicon << " is absent (the shared real-data folder is not here)";
@@ -142,7 +143,7 @@ TEST(CalibrationRealData, ViconBoxCompletedTheSameWhateverTheOrderOfPoints) {
         if (a.matched < 3)
             continue;
         ++boxModels;
-        EXPECT_GE(a.matched, 6u);
+        EXPECT_EQ(a.matched, 8u);
         EXPECT_EQ(model.markers_model_mm.size(), a.matched) << "skin markers in the box's model";
         EXPECT_LT(a.rms_mm, 1.0);
         RecordProperty("completed_box_markers", std::to_string(a.matched));
