@@ -53,7 +53,7 @@ struct CompletionConfig {
     double handoverTolerance_mm = 4.0;
     /// Two markers of one model closer than this are one (mm).
     double minMarkerSpacing_mm = 4.0;
-    /// Alternations of pose and marker least squares at the end.
+    /// Rounds of pose fits and a joint least-squares marker step at the end.
     int refineIterations = 4;
     /// A model has at least this many markers.
     std::size_t minModelMarkers = 4;
@@ -113,7 +113,8 @@ struct CompletionCounters {
  * scratch: each frame's points are put into the model's frame by its pose, and the places where
  * points sit across many frames, and are seen whenever the cameras look at them as before, become
  * its markers. The rounds stop when the models stop changing. Marker positions are then refined by
- * alternating least squares over every pose, co-visibility edges are counted, and S_min is set.
+ * least squares over every pose and marker at once, co-visibility edges are counted, and S_min is
+ * set.
  *
  * It runs once, when a session ends, off the frame loop (the firmware gives it a thread of its
  * own): run() allocates its working storage when it starts, unlike the per-frame stages.

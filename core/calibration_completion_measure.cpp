@@ -1,5 +1,6 @@
 // Completion, measure step: a body's markers from every frame it was found in, then least squares.
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <numbers>
@@ -260,6 +261,59 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
 // ---------------------------------------------------------------------------------------------
 // Least squares over every pose
 
+namespace {
+
+/// Adds one frame's observations to the reduced normal equations of a joint least squares over
+/// poses and markers (the frame's pose eliminated): residual r = R m + t - p, pose perturbed on
+/// the left (rotation, then translation), markers in the body frame.
+void addToReducedSystem(const RigidTransform& rigFromBody, std::span<const Vec3> markers_mm,
+                        std::span<const Vec3> points_mm, std::span<const std::size_t> which,
+                        Eigen::MatrixXd& reduced, Eigen::VectorXd& rhs) {
+    if (which.size() < 3)
+        return;
+    const Mat3 rotation = rigFromBody.rotationMatrix();
+    Eigen::Matrix<double, 6, 6> hpp = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> gp = Eigen::Matrix<double, 6, 1>::Zero();
+    // Per observation: its pose Jacobian (3 x 6) and residual, kept for the second pass.
+    constexpr std::size_t kMaxObservations = MarkerSet::kCapacity;
+    const std::size_t count = std::min(which.size(), kMaxObservations);
+    std::array<Eigen::Matrix<double, 3, 6>, kMaxObservations> jp;
+    std::array<Vec3, kMaxObservations> residual;
+    for (std::size_t i = 0; i < count; ++i) {
+        const Vec3 turned = rotation * markers_mm[i];
+        residual[i] = turned + rigFromBody.translation_mm - points_mm[i];
+        Mat3 skew;
+        skew << 0.0, -turned.z(), turned.y(), turned.z(), 0.0, -turned.x(), -turned.y(), turned.x(),
+            0.0;
+        jp[i].leftCols<3>() = -skew;
+        jp[i].rightCols<3>().setIdentity();
+        hpp += jp[i].transpose() * jp[i];
+        gp += jp[i].transpose() * residual[i];
+    }
+    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> poseBlock(hpp);
+    if (poseBlock.info() != Eigen::Success || !poseBlock.isPositive())
+        return;
+    // H_mm = R^T R = I per observation; H_pm = J_p^T R; g_m = R^T r.
+    const Eigen::Matrix<double, 6, 1> hppInvGp = poseBlock.solve(gp);
+    std::array<Eigen::Matrix<double, 6, 3>, kMaxObservations> hpm;
+    std::array<Eigen::Matrix<double, 6, 3>, kMaxObservations> hppInvHpm;
+    for (std::size_t i = 0; i < count; ++i) {
+        hpm[i] = jp[i].transpose() * rotation;
+        hppInvHpm[i] = poseBlock.solve(hpm[i]);
+    }
+    for (std::size_t i = 0; i < count; ++i) {
+        const auto a = static_cast<Eigen::Index>(3 * which[i]);
+        reduced.block<3, 3>(a, a) += Mat3::Identity();
+        rhs.segment<3>(a) -= rotation.transpose() * residual[i] - hpm[i].transpose() * hppInvGp;
+        for (std::size_t j = 0; j < count; ++j) {
+            const auto b = static_cast<Eigen::Index>(3 * which[j]);
+            reduced.block<3, 3>(a, b) -= hpm[i].transpose() * hppInvHpm[j];
+        }
+    }
+}
+
+} // namespace
+
 void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
     const std::size_t frames = session.frames();
     const std::size_t n = body.markers_mm.size();
@@ -272,10 +326,18 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
     std::vector<std::uint32_t> together(n * n, 0);
     std::vector<Vec3> from, to;
     std::vector<std::size_t> which;
+    // The normal equations of all poses and markers at once, poses eliminated (Schur complement):
+    // a marker step that accounts for how every pose moves with the markers. Marker means alone
+    // (block coordinate descent) straighten a chain of sides only slowly.
+    const auto dimension = static_cast<Eigen::Index>(3 * n);
+    Eigen::MatrixXd reduced(dimension, dimension);
+    Eigen::VectorXd rhs(dimension);
     for (int iteration = 0; iteration < config_.refineIterations; ++iteration) {
         const bool last = iteration + 1 == config_.refineIterations;
         std::fill(sums.begin(), sums.end(), Vec3::Zero());
         std::fill(counts.begin(), counts.end(), 0U);
+        reduced.setZero();
+        rhs.setZero();
         for (std::size_t f = 0; f < frames; ++f) {
             if (!body.posed[f])
                 continue;
@@ -311,14 +373,26 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
                 sums[which[i]] += bodyFromRig.apply(to[i]);
                 ++counts[which[i]];
             }
+            addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
             if (last)
                 for (std::size_t i = 0; i < which.size(); ++i)
                     for (std::size_t j = i + 1; j < which.size(); ++j)
                         ++together[which[i] * n + which[j]];
         }
+        // Markers no frame saw keep their place; the rest take the joint step. The step cannot
+        // move the layout as a whole (poses follow), so that freedom is held by a small damping.
         for (std::size_t k = 0; k < n; ++k)
-            if (counts[k] > 0)
-                body.markers_mm[k] = sums[k] / static_cast<double>(counts[k]);
+            if (counts[k] == 0) {
+                const auto at = static_cast<Eigen::Index>(3 * k);
+                reduced.block<3, 3>(at, at).setIdentity();
+                rhs.segment<3>(at).setZero();
+            }
+        const double damping = 1e-9 * std::max(1.0, reduced.diagonal().mean());
+        reduced.diagonal().array() += damping;
+        const Eigen::VectorXd step = reduced.ldlt().solve(rhs);
+        if (step.allFinite())
+            for (std::size_t k = 0; k < n; ++k)
+                body.markers_mm[k] += step.segment<3>(static_cast<Eigen::Index>(3 * k));
     }
     body.edges.clear();
     for (std::size_t i = 0; i < n; ++i)
