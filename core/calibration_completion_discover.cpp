@@ -7,10 +7,13 @@
 #include <optional>
 
 #include "core/calibration_completion.hpp"
+#include "core/completion_geometry.hpp"
 #include "core/marker_set.hpp"
 #include "core/rigid_fit.hpp"
 
 namespace edgetrack {
+
+using namespace completion_detail;
 
 namespace {
 
@@ -72,15 +75,7 @@ void CalibrationCompletion::discoverBodies(const SessionBuffer& session) {
                     continue; // lost earlier
                 const Vec3 predicted =
                     track.size() >= 2 ? 2.0 * track.back() - track[track.size() - 2] : track.back();
-                double best2 = kDiscoveryGate_mm * kDiscoveryGate_mm;
-                const Vec3* match = nullptr;
-                for (const Vec3& p : points) {
-                    const double d2 = (p - predicted).squaredNorm();
-                    if (d2 <= best2) {
-                        best2 = d2;
-                        match = &p;
-                    }
-                }
+                const Vec3* match = nearestPoint(points, predicted, kDiscoveryGate_mm);
                 if (match != nullptr)
                     track.push_back(*match);
             }

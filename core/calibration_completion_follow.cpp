@@ -146,15 +146,7 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
                     if (!a.marker && a.hits < kFollowAnchorHits)
                         continue;
                     const Vec3 there = predicted.apply(a.place());
-                    double best2 = radius * radius;
-                    const Vec3* match = nullptr;
-                    for (const Vec3& p : points) {
-                        const double d2 = (p - there).squaredNorm();
-                        if (d2 <= best2) {
-                            best2 = d2;
-                            match = &p;
-                        }
-                    }
+                    const Vec3* match = nearestPoint(points, there, radius);
                     if (match == nullptr ||
                         std::find(taken.begin(), taken.end(), match) != taken.end() ||
                         isClaimed(*match))

@@ -206,17 +206,8 @@ CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
     std::vector<std::size_t> which, ownAt;
     std::vector<std::uint32_t> counts(nB);
     std::vector<const Vec3*> matchedA(nA);
-    auto nearest = [&](std::span<const Vec3> points, const Vec3& there) -> const Vec3* {
-        double best2 = radius * radius;
-        const Vec3* match = nullptr;
-        for (const Vec3& p : points) {
-            const double d2 = (p - there).squaredNorm();
-            if (d2 <= best2) {
-                best2 = d2;
-                match = &p;
-            }
-        }
-        return match;
+    auto nearest = [&](std::span<const Vec3> points, const Vec3& there) {
+        return nearestPoint(points, there, radius);
     };
     // Alternating least squares, as refine() does for one body: the union fitted to each frame,
     // then b's markers placed in a's frame by those fits.

@@ -347,15 +347,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
             which.clear();
             for (std::size_t k = 0; k < n; ++k) {
                 const Vec3 there = body.T_rig_from_body[f].apply(body.markers_mm[k]);
-                double best2 = radius * radius;
-                const Vec3* match = nullptr;
-                for (const Vec3& p : points) {
-                    const double d2 = (p - there).squaredNorm();
-                    if (d2 <= best2) {
-                        best2 = d2;
-                        match = &p;
-                    }
-                }
+                const Vec3* match = nearestPoint(points, there, radius);
                 if (match) {
                     from.push_back(body.markers_mm[k]);
                     to.push_back(*match);

@@ -47,6 +47,22 @@ struct Registration {
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
                             double tolerance_mm, double matchTolerance_mm);
 
+/// The point of \a points_mm nearest to \a there_mm within \a radius_mm (of equally near ones,
+/// the last), or null.
+inline const Vec3* nearestPoint(std::span<const Vec3> points_mm, const Vec3& there_mm,
+                                double radius_mm) {
+    double best2 = radius_mm * radius_mm;
+    const Vec3* match = nullptr;
+    for (const Vec3& p : points_mm) {
+        const double d2 = (p - there_mm).squaredNorm();
+        if (d2 <= best2) {
+            best2 = d2;
+            match = &p;
+        }
+    }
+    return match;
+}
+
 /// \a body's pose at \a t_s carried on from its poses at \a t0_s and \a t1_s (t0 < t1): its
 /// centre \a centre_body (body frame) moves on at its speed, and it turns on at its turn rate.
 RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
