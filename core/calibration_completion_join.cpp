@@ -94,27 +94,15 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // The relative pose most frames come near is only a start: a pose from three or
                 // four markers turns by a degree or two, which moves a far marker by millimetres.
                 // The judgement is the fit of both layouts as one to every shared frame's points.
-                std::size_t bestAgree = 0;
-                std::size_t bestCandidate = 0;
-                const std::size_t step =
-                    std::max<std::size_t>(1, relative.size() / kConsensusCandidates);
-                for (std::size_t k = 0; k < relative.size(); k += step) {
-                    std::size_t agree = 0;
-                    for (const RigidTransform& r : relative)
-                        if (disagreement_mm(r, relative[k], ball) <= config_.sameBodyTolerance_mm)
-                            ++agree;
-                    if (agree > bestAgree) {
-                        bestAgree = agree;
-                        bestCandidate = k;
-                    }
-                }
+                const Agreement most = mostAgreed(relative, ball, config_.sameBodyTolerance_mm,
+                                                  relative.size() / kConsensusCandidates);
                 // Most frames must come near one relative pose at all: a piece of a self-similar
                 // layout found alone on the other's points fits there too, but by a relative pose
                 // that changes from frame to frame.
-                if (2 * bestAgree < c.shared)
+                if (2 * most.agree < c.shared)
                     return c;
                 const OneBodyFit fit =
-                    fitAsOneBody(session, sharedFrames, into, from, alone, relative[bestCandidate]);
+                    fitAsOneBody(session, sharedFrames, into, from, alone, relative[most.index]);
                 if (static_cast<double>(fit.framesFitting) >=
                     config_.sameBodyShare * static_cast<double>(c.shared))
                     c.intoFromFrom = fit.intoFromFrom;
@@ -124,35 +112,33 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             // one; two alike objects would each be found alone on the same points.
             const Consensus joint = consensus(false);
             std::optional<RigidTransform> intoFromFrom = joint.intoFromFrom;
-            bool byLayout = false;
-            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
+            if (intoFromFrom) {
+                ++counters_.joinedByMotion;
+            } else if (joint.shared < config_.minSharedFrames) {
                 // Seldom found at once jointly: pieces that share markers, whose shared points the
                 // joint tracker gives to one of them. Each found alone, they move as one.
                 trackAlone(a);
                 trackAlone(b);
-                intoFromFrom = consensus(true).intoFromFrom;
-                if (!intoFromFrom) {
-                    // One may be a piece of the other that the tracker gave the other's points to,
-                    // or the two may share markers but never be in view together. Four or more
-                    // markers in one place of the other's layout tie them, unless a self-similar
-                    // layout lets them lie as well in another place.
+                // Or one may be a piece of the other that the tracker gave the other's points to,
+                // or the two may share markers but never be in view together. Four or more
+                // markers in one place of the other's layout tie them, unless a self-similar
+                // layout lets them lie as well in another place.
+                auto layoutPlacement = [&]() -> std::optional<RigidTransform> {
                     const Registration r =
                         registerLayout(from.markers_mm, into.markers_mm,
                                        config_.sameBodyTolerance_mm, kRegistrationTolerance_mm);
-                    if (r.matched >= 4 && r.matched > r.runnerUp) {
-                        intoFromFrom = r.wholeFromPart;
-                        byLayout = true;
-                    }
-                }
-            }
-            if (intoFromFrom)
-                ++(byLayout ? counters_.joinedByLayout : counters_.joinedByMotion);
-            if (!intoFromFrom && joint.shared < config_.minSharedFrames) {
-                // Never in view together: one piece of a turning body may come into view just as
-                // the other leaves. The pose of the one, carried on at its speed, then lands on
-                // the other's pose by one relative pose, every time it happens.
-                intoFromFrom = relativePoseAcrossHandovers(session, into, from);
-                if (intoFromFrom)
+                    if (r.matched >= 4 && r.matched > r.runnerUp)
+                        return r.wholeFromPart;
+                    return std::nullopt;
+                };
+                // Or, never in view together, one piece of a turning body may come into view just
+                // as the other leaves: the pose of the one, carried on at its speed, then lands
+                // on the other's pose by one relative pose, every time it happens.
+                if ((intoFromFrom = consensus(true).intoFromFrom))
+                    ++counters_.joinedByMotion;
+                else if ((intoFromFrom = layoutPlacement()))
+                    ++counters_.joinedByLayout;
+                else if ((intoFromFrom = relativePoseAcrossHandovers(session, into, from)))
                     ++counters_.joinedByHandover;
             }
             if (!intoFromFrom)
@@ -347,24 +333,14 @@ CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session,
     handover(b, a, ballB, false);
     if (estimates.size() < kMinHandovers)
         return std::nullopt;
-    std::size_t bestAgree = 0, best = 0;
-    for (std::size_t c = 0; c < estimates.size(); ++c) {
-        std::size_t agree = 0;
-        for (const RigidTransform& e : estimates)
-            if (disagreement_mm(e, estimates[c], ballB) <= config_.handoverTolerance_mm)
-                ++agree;
-        if (agree > bestAgree) {
-            bestAgree = agree;
-            best = c;
-        }
-    }
-    if (bestAgree < kMinHandovers ||
-        static_cast<double>(bestAgree) <
+    const Agreement most = mostAgreed(estimates, ballB, config_.handoverTolerance_mm);
+    if (most.agree < kMinHandovers ||
+        static_cast<double>(most.agree) <
             config_.sameBodyShare * static_cast<double>(estimates.size()))
         return std::nullopt;
     std::vector<RigidTransform> agreeing;
     for (const RigidTransform& e : estimates)
-        if (disagreement_mm(e, estimates[best], ballB) <= config_.handoverTolerance_mm)
+        if (disagreement_mm(e, estimates[most.index], ballB) <= config_.handoverTolerance_mm)
             agreeing.push_back(e);
     return meanTransform(agreeing, ballB);
 }

@@ -321,7 +321,6 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
         return;
     const double radius =
         kRefineRadiusFactor * std::max(config_.siteRadius_mm, body.placeRadius_mm);
-    std::vector<Vec3> sums(n);
     std::vector<std::uint32_t> counts(n);
     std::vector<std::uint32_t> together(n * n, 0);
     std::vector<Vec3> from, to;
@@ -334,7 +333,6 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
     Eigen::VectorXd rhs(dimension);
     for (int iteration = 0; iteration < config_.refineIterations; ++iteration) {
         const bool last = iteration + 1 == config_.refineIterations;
-        std::fill(sums.begin(), sums.end(), Vec3::Zero());
         std::fill(counts.begin(), counts.end(), 0U);
         reduced.setZero();
         rhs.setZero();
@@ -360,11 +358,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
                 continue;
             }
             body.T_rig_from_body[f] = fit->transform;
-            const RigidTransform bodyFromRig = fit->transform.inverse();
-            for (std::size_t i = 0; i < which.size(); ++i) {
-                sums[which[i]] += bodyFromRig.apply(to[i]);
-                ++counts[which[i]];
-            }
+            for (const std::size_t k : which)
+                ++counts[k];
             addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
             if (last)
                 for (std::size_t i = 0; i < which.size(); ++i)

@@ -16,6 +16,9 @@ namespace {
 /// Congruent triangle pairs a registration tries at most: a self-similar layout (a sphere of many
 /// markers) has thousands, and the first few hundred already show that it registers several ways.
 constexpr std::size_t kRegistrationCandidates = 20000;
+/// Triangles of a part lower than this (mm, twice the area over the longest side) leave the turn
+/// about their long side too loosely held to place a layout by.
+constexpr double kMinTriangleHeight_mm = 8.0;
 
 } // namespace
 
@@ -52,6 +55,20 @@ RigidTransform meanTransform(std::span<const RigidTransform> transforms, const E
     centre /= static_cast<double>(transforms.size());
     mean.translation_mm = centre - mean.rotation * ball.centre;
     return mean;
+}
+
+Agreement mostAgreed(std::span<const RigidTransform> transforms, const Extent& ball,
+                     double tolerance_mm, std::size_t step) {
+    Agreement best;
+    for (std::size_t k = 0; k < transforms.size(); k += std::max<std::size_t>(step, 1)) {
+        std::size_t agree = 0;
+        for (const RigidTransform& t : transforms)
+            if (disagreement_mm(t, transforms[k], ball) <= tolerance_mm)
+                ++agree;
+        if (agree > best.agree)
+            best = {k, agree};
+    }
+    return best;
 }
 
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
@@ -102,63 +119,64 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
                                          [](double v, const Pair& p) { return v < p.d_mm; });
         return std::span<const Pair>(lo, hi);
     };
-    // Each registration found, as which part marker lies on which whole one.
-    std::vector<std::vector<std::uint32_t>> found;
-    std::vector<std::uint32_t> bestOnto;
-    // Every well-spread triangle of the part against every congruent one of the whole: the
-    // answer must not depend on the order in which either layout lists its markers.
-    std::size_t candidates = 0;
-    for (std::size_t i = 0; i < n && candidates < kRegistrationCandidates; ++i)
-        for (std::size_t j = i + 1; j < n && candidates < kRegistrationCandidates; ++j) {
-            const std::span<const Pair> sidesAB = near((part[i] - part[j]).norm());
-            if (sidesAB.empty())
-                continue;
-            for (std::size_t k = j + 1; k < n; ++k) {
-                const Vec3 &a = part[i], &b = part[j], &c = part[k];
-                const double twiceArea = (b - a).cross(c - a).norm();
-                const double longest = std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
-                if (longest <= 0.0 || twiceArea / longest < 8.0)
+    // Every well-spread triangle of the part against every congruent one of the whole, each
+    // placement refitted on all the markers it matches: the answer must not depend on the order
+    // in which either layout lists its markers. `placed` sees each (transform, count) with the
+    // part's markers in `onto`.
+    auto forEachPlacement = [&](auto&& placed) {
+        std::size_t candidates = 0;
+        for (std::size_t i = 0; i < n && candidates < kRegistrationCandidates; ++i)
+            for (std::size_t j = i + 1; j < n && candidates < kRegistrationCandidates; ++j) {
+                const std::span<const Pair> sidesAB = near((part[i] - part[j]).norm());
+                if (sidesAB.empty())
                     continue;
-                const double dac = (a - c).norm(), dbc = (b - c).norm();
-                for (const Pair& xy : sidesAB)
-                    for (std::uint32_t z = 0; z < m; ++z) {
-                        if (z == xy.x || z == xy.y ||
-                            std::abs((whole[xy.x] - whole[z]).norm() - dac) > tolerance_mm ||
-                            std::abs((whole[xy.y] - whole[z]).norm() - dbc) > tolerance_mm)
-                            continue;
-                        ++candidates;
-                        const Vec3 tri[3] = {a, b, c};
-                        const Vec3 target[3] = {whole[xy.x], whole[xy.y], whole[z]};
-                        const std::optional<RigidFit> seed = fitRigid(tri, target);
-                        if (!seed || matchOn(seed->transform) < 3)
-                            continue;
-                        // Every marker it matches, fitted at once, then matched again.
-                        const std::optional<RigidFit> all = fitRigid(from, to);
-                        const RigidTransform t = all ? all->transform : seed->transform;
-                        const std::size_t count = matchOn(t);
-                        if (std::find(found.begin(), found.end(), onto) == found.end())
-                            found.push_back(onto);
-                        if (count > best.matched) {
-                            best.matched = count;
-                            best.wholeFromPart = t;
-                            bestOnto = onto;
+                for (std::size_t k = j + 1; k < n; ++k) {
+                    const Vec3 &a = part[i], &b = part[j], &c = part[k];
+                    const double twiceArea = (b - a).cross(c - a).norm();
+                    const double longest =
+                        std::max({(b - a).norm(), (c - a).norm(), (c - b).norm()});
+                    if (longest <= 0.0 || twiceArea / longest < kMinTriangleHeight_mm)
+                        continue;
+                    const double dac = (a - c).norm(), dbc = (b - c).norm();
+                    for (const Pair& xy : sidesAB)
+                        for (std::uint32_t z = 0; z < m; ++z) {
+                            if (z == xy.x || z == xy.y ||
+                                std::abs((whole[xy.x] - whole[z]).norm() - dac) > tolerance_mm ||
+                                std::abs((whole[xy.y] - whole[z]).norm() - dbc) > tolerance_mm)
+                                continue;
+                            ++candidates;
+                            const Vec3 tri[3] = {a, b, c};
+                            const Vec3 target[3] = {whole[xy.x], whole[xy.y], whole[z]};
+                            const std::optional<RigidFit> seed = fitRigid(tri, target);
+                            if (!seed || matchOn(seed->transform) < 3)
+                                continue;
+                            const std::optional<RigidFit> all = fitRigid(from, to);
+                            const RigidTransform t = all ? all->transform : seed->transform;
+                            placed(t, matchOn(t));
                         }
-                    }
+                }
             }
+    };
+    std::vector<std::uint32_t> bestOnto;
+    forEachPlacement([&](const RigidTransform& t, std::size_t count) {
+        if (count > best.matched) {
+            best.matched = count;
+            best.wholeFromPart = t;
+            bestOnto = onto;
         }
+    });
     if (best.matched == 0)
         return best;
-    // Another registration is one that shares fewer than three of the best's pairs: one that
-    // shares three is the same placement, matched a little differently.
-    for (const std::vector<std::uint32_t>& other : found) {
-        std::size_t count = 0, common = 0;
-        for (std::size_t i = 0; i < n; ++i) {
-            count += other[i] != kNone ? 1U : 0U;
-            common += other[i] != kNone && other[i] == bestOnto[i] ? 1U : 0U;
-        }
+    // Another placement is one that shares fewer than three of the best's pairs: one that shares
+    // three is the same placement, matched a little differently. A second pass, rather than
+    // keeping every placement until the best is known.
+    forEachPlacement([&](const RigidTransform&, std::size_t count) {
+        std::size_t common = 0;
+        for (std::size_t i = 0; i < n; ++i)
+            common += onto[i] != kNone && onto[i] == bestOnto[i] ? 1U : 0U;
         if (common < 3)
             best.runnerUp = std::max(best.runnerUp, count);
-    }
+    });
     return best;
 }
 

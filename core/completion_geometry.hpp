@@ -27,6 +27,17 @@ double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const E
 /// ball's centre, and the mean place of that centre.
 RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball);
 
+/// Which transform the most others come near, and how many come near it (itself included).
+struct Agreement {
+    std::size_t index = 0;
+    std::size_t agree = 0;
+};
+
+/// Of \a transforms at indices 0, \a step, 2 \a step, ..., the one that most of \a transforms
+/// put the points of \a ball within \a tolerance_mm of (disagreement_mm); the first of equals.
+Agreement mostAgreed(std::span<const RigidTransform> transforms, const Extent& ball,
+                     double tolerance_mm, std::size_t step = 1);
+
 /// The placement of one layout in another: which transform, how many markers it puts onto the
 /// other's, and how many the best different placement puts there.
 struct Registration {
