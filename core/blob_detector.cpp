@@ -78,7 +78,7 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     if (!valid_)
         return;
     moments_ = std::make_unique<Moments[]>(config.maxLabels);
-    parent_ = std::make_unique<int[]>(config.maxLabels);
+    labels_ = DisjointSets(config.maxLabels);
     // At most one run per two pixels of a row.
     const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
     previousRuns_ = std::make_unique<Run[]>(runsPerRow);
@@ -88,31 +88,26 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
 BlobDetector::~BlobDetector() = default;
 
 int BlobDetector::newLabel() {
-    if (static_cast<std::size_t>(labelCount_) >= config_.maxLabels) {
+    if (!labels_.add()) {
         labelsExhausted_ = true;
         return -1;
     }
-    parent_[idx(labelCount_)] = labelCount_;
-    moments_[idx(labelCount_)] = Moments{};
-    return labelCount_++;
+    const std::size_t label = labels_.size() - 1;
+    moments_[label] = Moments{};
+    return static_cast<int>(label);
 }
 
 int BlobDetector::findRoot(int label) {
-    while (parent_[idx(label)] != label) {
-        parent_[idx(label)] = parent_[idx(parent_[idx(label)])]; // path halving
-        label = parent_[idx(label)];
-    }
-    return label;
+    return static_cast<int>(labels_.find(idx(label)));
 }
 
 int BlobDetector::unite(int a, int b) {
-    const int ra = findRoot(a), rb = findRoot(b);
+    const std::size_t ra = labels_.find(idx(a)), rb = labels_.find(idx(b));
     if (ra == rb)
-        return ra;
-    const int keep = std::min(ra, rb), gone = std::max(ra, rb);
-    moments_[idx(keep)].add(moments_[idx(gone)]);
-    parent_[idx(gone)] = keep;
-    return keep;
+        return static_cast<int>(ra);
+    // The smaller label stays the root (DisjointSets), and holds the moments of both.
+    moments_[std::min(ra, rb)].add(moments_[std::max(ra, rb)]);
+    return static_cast<int>(labels_.unite(ra, rb));
 }
 
 void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
@@ -178,7 +173,7 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     ++counters_.images;
     if (!valid_)
         return;
-    labelCount_ = 0;
+    labels_.reset(0);
     labelsExhausted_ = false;
     previousCount_ = 0;
     previousScan_ = 0;
@@ -276,10 +271,10 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
 }
 
 void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out) {
-    for (int label = 0; label < labelCount_; ++label) {
-        if (parent_[idx(label)] != label)
+    for (std::size_t label = 0; label < labels_.size(); ++label) {
+        if (!labels_.isRoot(label))
             continue;
-        const Moments& m = moments_[idx(label)];
+        const Moments& m = moments_[label];
         if (m.count < config_.minArea_px) {
             ++counters_.rejectedSmall;
             continue;

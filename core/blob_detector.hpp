@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "core/bounded_vector.hpp"
+#include "core/disjoint_sets.hpp"
 #include "core/geometry.hpp"
 
 namespace edgetrack {
@@ -98,8 +99,7 @@ private:
     BlobCounters counters_{};
 
     std::unique_ptr<Moments[]> moments_;
-    std::unique_ptr<int[]> parent_;
-    int labelCount_ = 0;
+    DisjointSets labels_{0};
     bool labelsExhausted_ = false;
 
     std::unique_ptr<Run[]> previousRuns_;

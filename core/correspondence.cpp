@@ -106,7 +106,8 @@ const ProximityBlock& SlhSolver::orthogonalFactor(const ProximityBlock& proximit
 BipartiteBlocks::BipartiteBlocks(std::size_t maxLeft, std::size_t maxRight)
     : maxLeft_(maxLeft)
     , maxRight_(maxRight)
-    , parent_(std::make_unique<int[]>(maxLeft + maxRight))
+    , sets_(maxLeft + maxRight)
+    , root_(std::make_unique<int[]>(maxLeft + maxRight))
     , blockOfRoot_(std::make_unique<int[]>(maxLeft + maxRight))
     , leftStart_(std::make_unique<int[]>(maxLeft + maxRight + 1))
     , rightStart_(std::make_unique<int[]>(maxLeft + maxRight + 1))
@@ -116,26 +117,14 @@ BipartiteBlocks::BipartiteBlocks(std::size_t maxLeft, std::size_t maxRight)
 void BipartiteBlocks::reset(std::size_t left, std::size_t right) {
     left_ = std::min(left, maxLeft_);
     right_ = std::min(right, maxRight_);
-    for (std::size_t i = 0; i < left_ + right_; ++i)
-        parent_[i] = static_cast<int>(i);
+    sets_.reset(left_ + right_);
     blockCount_ = 0;
-}
-
-int BipartiteBlocks::root(int node) {
-    while (parent_[idx(node)] != node) {
-        parent_[idx(node)] = parent_[idx(parent_[idx(node)])];
-        node = parent_[idx(node)];
-    }
-    return node;
 }
 
 void BipartiteBlocks::link(std::size_t i, std::size_t j) {
     if (i >= left_ || j >= right_)
         return;
-    const int a = root(static_cast<int>(i));
-    const int b = root(static_cast<int>(left_ + j));
-    if (a != b)
-        parent_[idx(std::max(a, b))] = std::min(a, b);
+    sets_.unite(i, left_ + j);
 }
 
 void BipartiteBlocks::build() {
@@ -144,17 +133,18 @@ void BipartiteBlocks::build() {
     std::fill_n(blockOfRoot_.get(), nodes, -1);
     std::fill_n(leftStart_.get(), nodes + 1, 0);
     std::fill_n(rightStart_.get(), nodes + 1, 0);
+    // Roots are the smallest node of their component; root[n] is n's, looked up once.
     for (std::size_t n = 0; n < nodes; ++n)
-        parent_[n] = root(static_cast<int>(n));
+        root_[n] = static_cast<int>(sets_.find(n));
 
     // A component is a block when it has a right member; number blocks in order of their roots.
     for (std::size_t j = 0; j < right_; ++j) {
-        const int r = parent_[left_ + j];
+        const int r = root_[left_ + j];
         if (blockOfRoot_[idx(r)] < 0)
             blockOfRoot_[idx(r)] = 0;
     }
     for (std::size_t i = 0; i < left_; ++i) {
-        const int r = parent_[i];
+        const int r = root_[i];
         if (blockOfRoot_[idx(r)] == 0)
             blockOfRoot_[idx(r)] = 1;
     }
@@ -164,10 +154,10 @@ void BipartiteBlocks::build() {
 
     // Counting sort of members by block.
     for (std::size_t i = 0; i < left_; ++i)
-        if (const int b = blockOfRoot_[idx(parent_[i])]; b >= 0)
+        if (const int b = blockOfRoot_[idx(root_[i])]; b >= 0)
             ++leftStart_[idx(b) + 1];
     for (std::size_t j = 0; j < right_; ++j)
-        if (const int b = blockOfRoot_[idx(parent_[left_ + j])]; b >= 0)
+        if (const int b = blockOfRoot_[idx(root_[left_ + j])]; b >= 0)
             ++rightStart_[idx(b) + 1];
     for (std::size_t b = 0; b < blockCount_; ++b) {
         leftStart_[b + 1] += leftStart_[b];
@@ -175,7 +165,7 @@ void BipartiteBlocks::build() {
     }
     // Place members using each block's start as a cursor, which leaves it at the block's end.
     for (std::size_t i = 0; i < left_; ++i) {
-        const int b = blockOfRoot_[idx(parent_[i])];
+        const int b = blockOfRoot_[idx(root_[i])];
         if (b < 0)
             continue;
         int& cursor = leftStart_[idx(b)];
@@ -183,7 +173,7 @@ void BipartiteBlocks::build() {
         ++cursor;
     }
     for (std::size_t j = 0; j < right_; ++j) {
-        const int b = blockOfRoot_[idx(parent_[left_ + j])];
+        const int b = blockOfRoot_[idx(root_[left_ + j])];
         if (b < 0)
             continue;
         int& cursor = rightStart_[idx(b)];

@@ -11,6 +11,8 @@
 #include <Eigen/Core>
 #include <Eigen/SVD>
 
+#include "core/disjoint_sets.hpp"
+
 namespace edgetrack {
 
 /// \brief Largest block the SVD solves; bigger blocks fall back to mutual-best pairing (counted).
@@ -44,11 +46,11 @@ public:
     std::span<const int> rightOf(std::size_t block) const;
 
 private:
-    int root(int node);
-
     std::size_t maxLeft_, maxRight_;
     std::size_t left_ = 0, right_ = 0;
-    std::unique_ptr<int[]> parent_;
+    /// Left elements are nodes 0 .. left_ - 1, right ones left_ .. left_ + right_ - 1.
+    DisjointSets sets_;
+    std::unique_ptr<int[]> root_;
     std::unique_ptr<int[]> blockOfRoot_;
     std::unique_ptr<int[]> leftStart_, rightStart_;
     std::unique_ptr<int[]> leftMembers_, rightMembers_;

@@ -5,8 +5,8 @@
 #include <bit>
 #include <cmath>
 #include <limits>
-#include <numeric>
 
+#include "core/disjoint_sets.hpp"
 #include "core/rigid_fit.hpp"
 
 namespace edgetrack {
@@ -24,12 +24,6 @@ constexpr int kMaxPasses = 3;
 constexpr int kMaxTrims = 2;
 // Weight of a new frame in a body's typical residual (a time constant of 20 frames).
 constexpr double kRmsSmoothing = 0.05;
-
-std::size_t findRoot(std::vector<std::size_t>& parent, std::size_t i) {
-    while (parent[i] != i)
-        i = parent[i] = parent[parent[i]];
-    return i;
-}
 
 } // namespace
 
@@ -86,15 +80,15 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     }
 
     // Copies of one layout are found from the models themselves: model files do not say it.
-    std::vector<std::size_t> parent(models.size());
-    std::iota(parent.begin(), parent.end(), std::size_t{0});
+    DisjointSets copiesOf(models.size());
+    copiesOf.reset(models.size());
     const SminConfig copies{2.0 * config.distanceTolerance_mm, 0.8, 4};
     for (std::size_t i = 0; i < models.size(); ++i)
         for (std::size_t j = i + 1; j < models.size(); ++j)
             if (sameShape(models[i], models[j], copies))
-                parent[findRoot(parent, i)] = findRoot(parent, j);
+                copiesOf.unite(i, j);
     for (std::size_t i = 0; i < slots_.size(); ++i)
-        slots_[i].shapeGroup = findRoot(parent, i);
+        slots_[i].shapeGroup = copiesOf.find(i);
 
     binStart_.assign(binCounts.size() + 1, 0);
     for (std::size_t b = 0; b < binCounts.size(); ++b)

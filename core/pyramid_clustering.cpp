@@ -13,7 +13,7 @@ constexpr std::size_t kSharedTriangle = 3;
 PyramidClustering::PyramidClustering(std::size_t maxCliques, std::size_t stepBudget)
     : stepBudget_(stepBudget)
     , cliques_(maxCliques)
-    , parent_(maxCliques)
+    , sets_(maxCliques)
     , clusters_(maxCliques) {}
 
 bool PyramidClustering::cluster(std::span<const MarkerSet> adjacency, const MarkerSet& vertices) {
@@ -36,35 +36,22 @@ bool PyramidClustering::cluster(std::span<const MarkerSet> adjacency, const Mark
     if (cliques_.size() > counters_.mostCliques)
         counters_.mostCliques = cliques_.size();
 
-    parent_.resize(cliques_.size());
-    for (std::size_t i = 0; i < cliques_.size(); ++i)
-        parent_[i] = i;
+    sets_.reset(cliques_.size());
     for (std::size_t i = 0; i < cliques_.size(); ++i)
         for (std::size_t j = i + 1; j < cliques_.size(); ++j)
-            if ((cliques_[i] & cliques_[j]).size() >= kSharedTriangle) {
-                const std::size_t a = root(i), b = root(j);
-                if (a != b)
-                    parent_[a < b ? b : a] = a < b ? a : b;
-            }
+            if ((cliques_[i] & cliques_[j]).size() >= kSharedTriangle)
+                sets_.unite(i, j);
     // Roots are the smallest clique of their component, so clusters come out in clique order.
     for (std::size_t i = 0; i < cliques_.size(); ++i) {
-        if (root(i) != i)
+        if (sets_.find(i) != i)
             continue;
         MarkerSet members;
         for (std::size_t j = i; j < cliques_.size(); ++j)
-            if (root(j) == i)
+            if (sets_.find(j) == i)
                 members |= cliques_[j];
         clusters_.push_back(members);
     }
     return true;
-}
-
-std::size_t PyramidClustering::root(std::size_t clique) {
-    while (parent_[clique] != clique) {
-        parent_[clique] = parent_[parent_[clique]];
-        clique = parent_[clique];
-    }
-    return clique;
 }
 
 void PyramidClustering::searchCliques(const MarkerSet& clique, MarkerSet candidates,

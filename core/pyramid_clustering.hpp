@@ -6,6 +6,7 @@
 #include <span>
 
 #include "core/bounded_vector.hpp"
+#include "core/disjoint_sets.hpp"
 #include "core/marker_set.hpp"
 
 namespace edgetrack {
@@ -59,14 +60,13 @@ public:
 
 private:
     void searchCliques(const MarkerSet& clique, MarkerSet candidates, MarkerSet excluded);
-    std::size_t root(std::size_t clique);
 
     std::size_t stepBudget_;
     std::size_t steps_ = 0;
     bool abandoned_ = false;
     std::span<const MarkerSet> adjacency_;
     BoundedVector<MarkerSet> cliques_;
-    BoundedVector<std::size_t> parent_;
+    DisjointSets sets_;
     BoundedVector<MarkerSet> clusters_;
     ClusteringCounters counters_{};
 };
