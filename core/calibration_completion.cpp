@@ -19,7 +19,9 @@ CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
     valid_ = config.maxModels > 0 && config.maxMarkersPerModel >= 4 &&
              config.maxMarkersPerModel <= MarkerSet::kCapacity && config.siteRadius_mm > 0.0 &&
              config.maxSites > 0 && config.minModelMarkers >= 4 && config.maxRounds > 0 &&
-             config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0;
+             config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0 &&
+             config.triangleTolerance_mm > 0.0 && config.triangleUniqueness >= 2.0 &&
+             config.minTriangleRun >= 2;
     if (!valid_)
         return;
     sites_.reserve(config.maxSites);
@@ -187,6 +189,7 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     for (std::size_t b = 0; b < alive; ++b)
         tracks.push_back({&bodies_[b].posed, &bodies_[b].T_rig_from_body});
     trackBothWays(session, trackingModels(alive), tracks);
+    poseFromTriangles(session);
 }
 
 void CalibrationCompletion::trackBothWays(const SessionBuffer& session,

@@ -14,6 +14,10 @@
 
 namespace edgetrack {
 
+namespace completion_detail {
+struct SortedTriangle;
+}
+
 /// \brief Settings of the completion stage; defaults suit hand-held objects at 100 Hz.
 struct CompletionConfig {
     /// How the provisional models are followed through the session.
@@ -51,6 +55,19 @@ struct CompletionConfig {
     /// Relative poses found by carrying one piece's pose on at its speed until the other piece
     /// comes into view agree within this (mm).
     double handoverTolerance_mm = 4.0;
+    /// Where the tracker needs four markers to find a body, three points pose it when their
+    /// distances match one triangle of its layout within triangleTolerance_mm on each side, and no
+    /// other triangle of any body comes within triangleUniqueness times that of this one; taken in
+    /// runs of at least minTriangleRun consecutive frames whose poses move on by at most
+    /// maxTriangleStep_mm, in frames of at most maxTrianglePoints points.
+    /// Each of the three markers must be seen from within triangleViewAngle_deg of a direction it
+    /// was seen from in a frame posed otherwise.
+    double triangleTolerance_mm = 0.75;
+    double triangleUniqueness = 4.0;
+    double triangleViewAngle_deg = 30.0;
+    std::size_t minTriangleRun = 10;
+    double maxTriangleStep_mm = 10.0;
+    std::size_t maxTrianglePoints = 32;
     /// Two markers of one model closer than this are one (mm).
     double minMarkerSpacing_mm = 4.0;
     /// Rounds of pose fits and a joint least-squares marker step at the end.
@@ -81,6 +98,8 @@ struct CompletionCounters {
     std::uint64_t framesTracked = 0;
     /// Frames in which a body the tracker had lost was followed on from a neighbouring frame.
     std::uint64_t framesFollowed = 0;
+    /// Frames in which a body was posed from three of its markers (a unique triangle).
+    std::uint64_t framesFromTriangles = 0;
     std::uint64_t seeds = 0;
     /// Bodies found in the session's points that no seed explained.
     std::uint64_t discovered = 0;
@@ -146,6 +165,8 @@ private:
         /// Co-visible marker pairs (a < b).
         std::vector<std::pair<std::uint16_t, std::uint16_t>> edges;
         std::vector<RigidTransform> T_rig_from_body;
+        /// Per frame: kNotPosed, kPosed (by the tracker, or followed on from such a pose) or
+        /// kPosedFromTriangle.
         std::vector<std::uint8_t> posed;
         /// Its poses when tracked with no other body: where pieces of one object share markers,
         /// the joint tracker gives the shared points to one of them, and the other goes unposed.
@@ -155,6 +176,9 @@ private:
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
     };
+    static constexpr std::uint8_t kNotPosed = 0;
+    static constexpr std::uint8_t kPosed = 1;
+    static constexpr std::uint8_t kPosedFromTriangle = 2;
     struct Site {
         Vec3 sum_mm = Vec3::Zero();
         std::uint32_t hits = 0;
@@ -176,6 +200,11 @@ private:
     /// poses go to \a tracks[k].
     void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,
                        std::span<const PoseTrack> tracks);
+    /// \brief Every alive body posed, in the frames the tracker did not find it, from three free
+    /// points that match a triangle of its layout that no other triangle of any body resembles.
+    void poseFromTriangles(const SessionBuffer& session);
+    void poseFromTriangles(const SessionBuffer& session, Body& body,
+                           std::span<const completion_detail::SortedTriangle> own);
     /// \brief New bodies from sets of four or more points that no body explains, that keep their
     /// distances while they move over a third of a second; each tracked through the session.
     void discoverBodies(const SessionBuffer& session);

@@ -180,6 +180,35 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
     return best;
 }
 
+SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
+                              std::uint32_t ib, std::uint32_t ic) {
+    std::array<std::pair<double, std::uint32_t>, 3> facing = {
+        {{(b - c).norm(), ia}, {(a - c).norm(), ib}, {(a - b).norm(), ic}}};
+    std::sort(facing.begin(), facing.end());
+    SortedTriangle t;
+    for (std::size_t i = 0; i < 3; ++i) {
+        t.sides_mm[i] = facing[i].first;
+        t.corners[i] = facing[i].second;
+    }
+    return t;
+}
+
+bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm) {
+    for (std::size_t i = 0; i < 3; ++i)
+        if (std::abs(a.sides_mm[i] - b.sides_mm[i]) > tolerance_mm)
+            return false;
+    return true;
+}
+
+bool wellShaped(const SortedTriangle& t, double tolerance_mm) {
+    const auto& s = t.sides_mm;
+    const double half = 0.5 * (s[0] + s[1] + s[2]);
+    const double areaSquared = half * (half - s[0]) * (half - s[1]) * (half - s[2]); // Heron
+    const double height = areaSquared > 0.0 ? 2.0 * std::sqrt(areaSquared) / s[2] : 0.0;
+    return s[1] - s[0] > 2.0 * tolerance_mm && s[2] - s[1] > 2.0 * tolerance_mm &&
+           height > 4.0 * tolerance_mm;
+}
+
 RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
                            double t1_s, double t_s, const Vec3& centre_body) {
     const double s = (t_s - t1_s) / (t1_s - t0_s);

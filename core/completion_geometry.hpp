@@ -1,7 +1,9 @@
 // Geometry the completion steps share: extents, transform agreement, layout registration.
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <span>
 
 #include "core/rigid_transform.hpp"
@@ -57,6 +59,27 @@ struct Registration {
  */
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
                             double tolerance_mm, double matchTolerance_mm);
+
+/// Three markers or points, their corners ordered by the side facing each, shortest first (mm):
+/// two congruent scalene triangles list their corresponding corners in the same order.
+struct SortedTriangle {
+    std::array<double, 3> sides_mm{};
+    std::array<std::uint32_t, 3> corners{};
+    /// Whose markers they are, and whether no other triangle of any body has the same sides.
+    std::size_t body = 0;
+    bool unique = true;
+};
+
+/// The triangle of \a a, \a b, \a c, whose indices are \a ia, \a ib, \a ic.
+SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
+                              std::uint32_t ib, std::uint32_t ic);
+
+/// Whether every side of \a a is within \a tolerance_mm of the same side of \a b.
+bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm);
+
+/// Whether its corners can be told apart by its sides at \a tolerance_mm, and it is tall enough
+/// over its longest side to fix a turn about it.
+bool wellShaped(const SortedTriangle& t, double tolerance_mm);
 
 /// The point of \a points_mm nearest to \a there_mm within \a radius_mm (of equally near ones,
 /// the last), or null.

@@ -97,7 +97,8 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     summary << "  completion: " << session.seedsUsed() << " online models in, " << k.discovered
             << " bodies found in the points, " << k.rounds << " rounds; "
             << k.joinedByMotion + k.joinedByLayout + k.joinedByHandover << " pieces joined, "
-            << k.framesFollowed << " frames followed, " << k.dropped << " dropped; markers added "
+            << k.framesFollowed << " frames followed, " << k.framesFromTriangles
+            << " posed from three markers, " << k.dropped << " dropped; markers added "
             << k.markersAdded << ", removed " << k.markersRemoved << "; refused: places "
             << k.siteOverflow << ", models " << k.modelOverflow << ", markers " << k.markerOverflow
             << "\n";

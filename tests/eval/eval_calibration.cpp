@@ -466,7 +466,7 @@ int main(int argc, char** argv) {
                     complete(online) ? "complete" : "incomplete");
         const CompletionCounters& k = completionCounters;
         std::printf("completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
-                    "followed, joined "
+                    "followed, %llu posed from triangles, joined "
                     "%llu by motion, %llu by layout and %llu by handover, dropped %llu, markers "
                     "added %llu and removed "
                     "%llu, overflow "
@@ -475,6 +475,7 @@ int main(int argc, char** argv) {
                     static_cast<unsigned long long>(k.discovered),
                     static_cast<unsigned long long>(k.rounds),
                     static_cast<unsigned long long>(k.framesFollowed),
+                    static_cast<unsigned long long>(k.framesFromTriangles),
                     static_cast<unsigned long long>(k.joinedByMotion),
                     static_cast<unsigned long long>(k.joinedByLayout),
                     static_cast<unsigned long long>(k.joinedByHandover),

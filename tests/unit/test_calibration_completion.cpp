@@ -259,6 +259,39 @@ TEST(CalibrationCompletion, JoinsTwoPiecesNeverSeenTogetherThatShareFourMarkers)
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
+// A piece of a body that is later seen only by three of its markers, and beside them, every
+// other fifth of a second, a marker it has never been seen with: the tracker needs four of a
+// model's markers to find it, and never more than four points are in view, too few to be found as
+// a body of their own. Only the three points whose distances match one triangle of the piece, and
+// no other, pose it; the new marker is then learnt from those poses.
+TEST(CalibrationCompletion, PosesAPieceFromThreeOfItsMarkersAndLearnsAMarkerSeenWithThem) {
+    const std::vector<Vec3> body = test::irregularLayout(7, 13, 15.0);
+    const CompletionConfig config;
+    // The condition of the scene: the three markers' triangle is like no other of the layout.
+    using completion_detail::congruent;
+    using completion_detail::sortedTriangle;
+    const auto shown = sortedTriangle(body[0], body[1], body[2], 0, 1, 2);
+    ASSERT_TRUE(completion_detail::wellShaped(shown, config.triangleTolerance_mm));
+    for (std::uint32_t i = 0; i < body.size(); ++i)
+        for (std::uint32_t j = i + 1; j < body.size(); ++j)
+            for (std::uint32_t k = std::max(j + 1, 3U); k < body.size(); ++k) {
+                ASSERT_FALSE(congruent(shown, sortedTriangle(body[i], body[j], body[k], i, j, k),
+                                       config.triangleUniqueness * config.triangleTolerance_mm));
+            }
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 12, [](std::size_t, std::size_t m, double t) {
+            if (t < 4.0)
+                return m < 6;
+            const bool newOneShows = static_cast<int>(t / 0.2) % 2 == 0;
+            return t >= 5.0 && (m < 3 || (m == 6 && newOneShows));
+        });
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 6)}), out), 1U);
+    EXPECT_GT(completion.counters().framesFromTriangles, 0U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
 // A body the online stage made no model of (no seed at all) is found in the session's points as a
 // set that keeps its distances while it moves; four reflections of the room that stand still keep
 // theirs too, but are no body.

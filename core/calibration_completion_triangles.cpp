@@ -1,0 +1,199 @@
+// Completion, triangle step: a body posed from three of its markers where the tracker needs four.
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <optional>
+
+#include "core/calibration_completion.hpp"
+#include "core/completion_geometry.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+using namespace completion_detail;
+
+namespace {
+
+/// Directions kept per marker for the view check.
+constexpr std::size_t kMaxTriangleViews = 256;
+
+} // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Poses from three markers
+
+void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
+    const std::size_t frames = session.frames();
+    if (frames < config_.minTriangleRun)
+        return;
+    const double tol = config_.triangleTolerance_mm;
+    const double apart = config_.triangleUniqueness * tol;
+
+    // The triangles of every alive body; a body's that no other triangle resembles are the ones
+    // three points can stand for. Resembles by a wider margin than a match needs: where a layout's
+    // triangles come close to each other (markers evenly spaced on a ring), the triangles of its
+    // markers not yet learnt come as close, and three of those would pose it wrongly.
+    std::vector<SortedTriangle> all;
+    for (std::size_t b = 0; b < bodies_.size(); ++b) {
+        const Body& other = bodies_[b];
+        if (!other.alive)
+            continue;
+        const std::vector<Vec3>& m = other.markers_mm;
+        for (std::uint32_t i = 0; i < m.size(); ++i)
+            for (std::uint32_t j = i + 1; j < m.size(); ++j)
+                for (std::uint32_t k = j + 1; k < m.size(); ++k) {
+                    SortedTriangle t = sortedTriangle(m[i], m[j], m[k], i, j, k);
+                    t.body = b;
+                    all.push_back(t);
+                }
+    }
+    std::sort(all.begin(), all.end(), [](const SortedTriangle& a, const SortedTriangle& b) {
+        return a.sides_mm[2] < b.sides_mm[2];
+    });
+    for (std::size_t i = 0; i < all.size(); ++i)
+        for (std::size_t j = i + 1;
+             j < all.size() && all[j].sides_mm[2] - all[i].sides_mm[2] <= apart; ++j)
+            if (congruent(all[i], all[j], apart)) {
+                all[i].unique = false;
+                all[j].unique = false;
+            }
+    std::vector<SortedTriangle> own;
+    for (std::size_t index = 0; index < bodies_.size(); ++index) {
+        if (!bodies_[index].alive)
+            continue;
+        own.clear();
+        for (const SortedTriangle& t : all)
+            if (t.body == index && t.unique && wellShaped(t, tol))
+                own.push_back(t);
+        if (!own.empty())
+            poseFromTriangles(session, bodies_[index], own);
+    }
+}
+
+void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body& body,
+                                              std::span<const SortedTriangle> own) {
+    const std::size_t frames = session.frames();
+    const double tol = config_.triangleTolerance_mm;
+    const double longest = own.back().sides_mm[2] + tol;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+
+    // The directions each marker was seen from in the frames posed so far (body frame, thinned).
+    // Three points of something else that match a triangle by chance put the body in a random
+    // attitude, from which its markers were hardly ever seen; three of its own markers are seen
+    // from about where they were seen before.
+    constexpr double kDegree = std::numbers::pi / 180.0;
+    const double thinning = std::cos(0.25 * config_.triangleViewAngle_deg * kDegree);
+    const double sameView = std::cos(config_.triangleViewAngle_deg * kDegree);
+    std::vector<std::vector<Vec3>> seenFrom(body.markers_mm.size());
+    for (std::size_t f = 0; f < frames; ++f) {
+        if (!body.posed[f])
+            continue;
+        const RigidTransform& rigFromBody = body.T_rig_from_body[f];
+        const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+        for (std::size_t m = 0; m < body.markers_mm.size(); ++m) {
+            if (nearestPoint(session.points(f), rigFromBody.apply(body.markers_mm[m]), radius) ==
+                nullptr)
+                continue;
+            const Vec3 view = (viewpoint - body.markers_mm[m]).normalized();
+            std::vector<Vec3>& directions = seenFrom[m];
+            if (directions.size() < kMaxTriangleViews &&
+                std::none_of(directions.begin(), directions.end(),
+                             [&](const Vec3& d) { return d.dot(view) >= thinning; }))
+                directions.push_back(view);
+        }
+    }
+    auto seenFromHere = [&](const RigidTransform& rigFromBody, std::uint32_t m) {
+        const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+        const Vec3 view = (viewpoint - body.markers_mm[m]).normalized();
+        return std::any_of(seenFrom[m].begin(), seenFrom[m].end(),
+                           [&](const Vec3& d) { return d.dot(view) >= sameView; });
+    };
+
+    // Points another body's pose explains are looked at too: where two pieces of one object
+    // share markers, the tracker gives the shared points to one of them only, and the other piece
+    // would never be seen posed with it.
+    std::vector<std::uint8_t> seeded(frames, 0);
+    std::vector<RigidTransform> seed(frames);
+    for (std::size_t f = 0; f < frames; ++f) {
+        const std::span<const Vec3> free = session.points(f);
+        if (body.posed[f] || free.size() < 3 || free.size() > config_.maxTrianglePoints)
+            continue;
+        // Every triple of points that stands for one triangle of the body: the pose that puts the
+        // most markers on points wins; two different poses that do equally well, none.
+        std::size_t bestSupport = 0;
+        bool tie = false;
+        std::optional<RigidTransform> best;
+        for (std::uint32_t i = 0; i < free.size(); ++i)
+            for (std::uint32_t j = i + 1; j < free.size(); ++j) {
+                if ((free[i] - free[j]).norm() > longest)
+                    continue;
+                for (std::uint32_t k = j + 1; k < free.size(); ++k) {
+                    const SortedTriangle seen = sortedTriangle(free[i], free[j], free[k], i, j, k);
+                    if (seen.sides_mm[2] > longest)
+                        continue;
+                    auto it = std::lower_bound(
+                        own.begin(), own.end(), seen.sides_mm[2] - tol,
+                        [](const SortedTriangle& t, double s) { return t.sides_mm[2] < s; });
+                    for (; it != own.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
+                        if (!congruent(*it, seen, tol))
+                            continue;
+                        const std::array<Vec3, 3> from = {body.markers_mm[it->corners[0]],
+                                                          body.markers_mm[it->corners[1]],
+                                                          body.markers_mm[it->corners[2]]};
+                        const std::array<Vec3, 3> to = {
+                            free[seen.corners[0]], free[seen.corners[1]], free[seen.corners[2]]};
+                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        if (!fit || !seenFromHere(fit->transform, it->corners[0]) ||
+                            !seenFromHere(fit->transform, it->corners[1]) ||
+                            !seenFromHere(fit->transform, it->corners[2]))
+                            continue;
+                        std::size_t support = 0;
+                        for (const Vec3& m : body.markers_mm)
+                            support +=
+                                nearestPoint(free, fit->transform.apply(m), radius) != nullptr;
+                        if (support > bestSupport) {
+                            bestSupport = support;
+                            best = fit->transform;
+                            tie = false;
+                        } else if (support == bestSupport && best &&
+                                   disagreement_mm(*best, fit->transform,
+                                                   extentOf(body.markers_mm)) > radius) {
+                            tie = true;
+                        }
+                    }
+                }
+            }
+        if (best && !tie) {
+            seeded[f] = 1;
+            seed[f] = *best;
+        }
+    }
+
+    // Three points that happen to fit a triangle for a frame or two pose nothing: only a run of
+    // frames, posed so or by the tracker, whose poses follow on from each other as a moving body's
+    // do, is taken.
+    const Extent ball = extentOf(body.markers_mm);
+    auto poseAt = [&](std::size_t f) -> const RigidTransform& {
+        return seeded[f] ? seed[f] : body.T_rig_from_body[f];
+    };
+    for (std::size_t f = 0; f < frames;) {
+        if (!seeded[f] && !body.posed[f]) {
+            ++f;
+            continue;
+        }
+        std::size_t end = f + 1;
+        while (end < frames && (seeded[end] || body.posed[end]) &&
+               disagreement_mm(poseAt(end - 1), poseAt(end), ball) <= config_.maxTriangleStep_mm)
+            ++end;
+        if (end - f >= config_.minTriangleRun)
+            for (std::size_t g = f; g < end; ++g)
+                if (seeded[g]) {
+                    body.posed[g] = kPosedFromTriangle;
+                    body.T_rig_from_body[g] = seed[g];
+                    ++counters_.framesFromTriangles;
+                }
+        f = end;
+    }
+}
+
+} // namespace edgetrack
