@@ -402,7 +402,6 @@ void ModelTracker::search(std::size_t body, double time_s) {
 void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
                               bool& haveBest) {
     const ModelSlot& slot = slots_[body];
-    const std::span<const Vec3> model = modelMarkers(body);
     const double tolerance = config_.distanceTolerance_mm;
     const std::size_t perMarker = config_.maxCandidatesPerMarker;
     std::fill_n(candidateCount_.begin(), slot.markerCount, 0U);

@@ -13,6 +13,7 @@
 #include <toml++/toml.h>
 
 #include "core/marker_set.hpp"
+#include "firmware_app/recording/toml_document.hpp"
 
 namespace edgetrack::app {
 
@@ -368,13 +369,10 @@ Result<hal::UdpEndpoint> parseEndpoint(std::string_view text) {
 }
 
 Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_view name) {
-    toml::parse_result parsed = toml::parse(text, name);
-    if (!parsed) {
-        const toml::parse_error& e = parsed.error();
-        return Error{std::string(name) + ":" + std::to_string(e.source().begin.line) + ": " +
-                     std::string(e.description())};
-    }
-    const toml::table& root = parsed.table();
+    const Result<toml::table> parsed = recording::parseTomlDocument(text, name);
+    if (!parsed)
+        return parsed.error();
+    const toml::table& root = *parsed;
     FirmwareConfig config;
     std::optional<Error> error;
 

@@ -65,11 +65,13 @@ Result<NamedModel> parseModelJson(std::string_view text, std::string_view name,
     json document;
     try {
         document = json::parse(text);
-    } catch (const json::parse_error& e) {
-        // e.what() reads "[json.exception.parse_error.101] parse error at line 2, column 5: ...".
+    } catch (const json::exception& e) {
+        // e.what() reads "[json.exception.parse_error.101] parse error at line 2, column 5: ...",
+        // or, for a number too large for a double, "[json.exception.out_of_range.406] number
+        // overflow parsing '1E999'" (found by tests/fuzz): the part after the bracket.
         const std::string what = e.what();
-        const std::size_t at = what.find("parse error");
-        return fail(at == std::string::npos ? what : what.substr(at));
+        const std::size_t at = what.find("] ");
+        return fail(at == std::string::npos ? what : what.substr(at + 2));
     }
     if (!document.is_object())
         return fail("not a JSON object");

@@ -100,6 +100,14 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
             c = next;
             return true;
         };
+        // A count or an id: a whole number a std::uint32_t holds (a cast of any other double is
+        // undefined behaviour).
+        auto whole = [](double x, std::uint32_t& out) {
+            if (!(x >= 0.0 && x <= 4294967295.0 && x == std::floor(x)))
+                return false;
+            out = static_cast<std::uint32_t>(x);
+            return true;
+        };
         if (line.rfind("fr ", 0) == 0) {
             parsed.frame = std::strtoull(c + 3, nullptr, 10);
             haveFrame = true;
@@ -109,16 +117,18 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
             parsed.calibrated = static_cast<std::uint32_t>(std::strtoul(c + 6, nullptr, 10));
         } else if (line.rfind("6d ", 0) == 0) {
             c += 3;
-            double count = 0.0;
-            if (!number(count))
+            double countValue = 0.0;
+            std::uint32_t count = 0;
+            if (!number(countValue) || !whole(countValue, count))
                 return Error{"dtrack: 6d without a count"};
-            for (int b = 0; b < static_cast<int>(count); ++b) {
+            for (std::uint32_t b = 0; b < count; ++b) {
                 std::array<double, 14> v{};
                 for (double& x : v)
                     if (!number(x))
                         return Error{"dtrack: 6d body " + std::to_string(b) + " is short"};
                 DtrackBody body;
-                body.id = static_cast<std::uint32_t>(v[0]);
+                if (!whole(v[0], body.id))
+                    return Error{"dtrack: 6d body " + std::to_string(b) + " has no id"};
                 body.quality = v[1];
                 Mat3 r;
                 r << v[5], v[8], v[11], v[6], v[9], v[12], v[7], v[10], v[13];
@@ -132,16 +142,19 @@ Result<ParsedDtrack> parseDtrack(std::string_view datagram) {
         } else if (line.rfind("3d ", 0) == 0) {
             c += 3;
             parsed.hasMarkerLine = true;
-            double count = 0.0;
-            if (!number(count))
+            double countValue = 0.0;
+            std::uint32_t count = 0;
+            if (!number(countValue) || !whole(countValue, count))
                 return Error{"dtrack: 3d without a count"};
-            for (int m = 0; m < static_cast<int>(count); ++m) {
+            for (std::uint32_t m = 0; m < count; ++m) {
                 std::array<double, 5> v{};
                 for (double& x : v)
                     if (!number(x))
                         return Error{"dtrack: 3d marker " + std::to_string(m) + " is short"};
-                parsed.markers.push_back(
-                    {static_cast<std::uint32_t>(v[0]), v[1], Vec3(v[2], v[3], v[4])});
+                std::uint32_t id = 0;
+                if (!whole(v[0], id))
+                    return Error{"dtrack: 3d marker " + std::to_string(m) + " has no id"};
+                parsed.markers.push_back({id, v[1], Vec3(v[2], v[3], v[4])});
             }
         } else if (line.rfind("ts2 ", 0) == 0) {
             // Three unsigned integers, as DTrackSDK reads them.

@@ -191,8 +191,13 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
             return r.u16(p.dataOffset); // unsigned: counts above 32767 are common
         if (p.type == 1)
             return r.u8(p.dataOffset);
-        if (p.type == 4)
-            return static_cast<std::int64_t>(r.f32(p.dataOffset));
+        if (p.type == 4) {
+            // A float beyond what an integer holds is no count (and casting it is undefined).
+            const float value = r.f32(p.dataOffset);
+            if (!(std::abs(value) < 1.0e15F))
+                return std::nullopt;
+            return static_cast<std::int64_t>(value);
+        }
         return std::nullopt;
     };
     auto real = [&](const std::string& key) -> std::optional<double> {
@@ -203,8 +208,11 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
     };
 
     C3dPoints out;
-    out.pointCount = static_cast<std::size_t>(
-        integer("POINT:USED").value_or(static_cast<std::int64_t>(pointCount)));
+    // POINT:USED is a 16-bit word, signed in the standard, unsigned in files past 32767 points.
+    const std::int64_t used = integer("POINT:USED").value_or(static_cast<std::int64_t>(pointCount));
+    if (used < 0 || used > 65535)
+        return fail("POINT:USED " + std::to_string(used) + " is not a number of points");
+    out.pointCount = static_cast<std::size_t>(used);
     out.frameRate_hz = real("POINT:RATE").value_or(static_cast<double>(rate));
     if (!(out.frameRate_hz > 0.0) || !std::isfinite(out.frameRate_hz))
         return fail("frame rate is not a positive number");
@@ -239,10 +247,13 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
     }
     out.labels.resize(out.pointCount);
 
-    const std::size_t dataBlock = static_cast<std::size_t>(
-        integer("POINT:DATA_START").value_or(static_cast<std::int64_t>(dataBlockHeader)));
-    if (dataBlock < 2)
+    const std::int64_t dataBlockValue =
+        integer("POINT:DATA_START").value_or(static_cast<std::int64_t>(dataBlockHeader));
+    if (dataBlockValue < 2)
         return fail("data section points into the header");
+    if (static_cast<std::uint64_t>(dataBlockValue - 1) > r.size() / kBlock)
+        return fail("data section starts past the end of the file");
+    const auto dataBlock = static_cast<std::size_t>(dataBlockValue);
     const std::size_t dataStart = (dataBlock - 1) * kBlock;
     const std::size_t sampleSize = floats ? 4 : 2;
     const std::size_t frameSize = (out.pointCount * 4 + analogPerFrame) * sampleSize;

@@ -7,10 +7,12 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 
 #include <toml++/toml.h>
 
 #include "firmware_app/recording/csv.hpp"
+#include "firmware_app/recording/toml_document.hpp"
 
 namespace edgetrack::recording {
 
@@ -37,18 +39,18 @@ std::optional<Level> parseLevel(std::string_view name) {
 
 namespace {
 
-Error rowError(const fs::path& path, const CsvRow& row, const std::string& what) {
-    return Error{path.string() + ":" + std::to_string(row.line) + ": " + what};
+Error rowError(std::string_view name, const CsvRow& row, const std::string& what) {
+    return Error{std::string(name) + ":" + std::to_string(row.line) + ": " + what};
 }
 
 // Rows of blobs, points and truth come grouped by frame in increasing order; frames.csv is strict.
-Status checkFrameOrder(const fs::path& path, const CsvRow& row, std::int64_t previous,
+Status checkFrameOrder(std::string_view name, const CsvRow& row, std::int64_t previous,
                        bool strictlyIncreasing) {
     const std::int64_t frame = row.integer(0);
     if (frame < 0)
-        return rowError(path, row, "frame " + std::to_string(frame) + " is negative");
+        return rowError(name, row, "frame " + std::to_string(frame) + " is negative");
     if (frame < previous || (strictlyIncreasing && frame == previous))
-        return rowError(path, row,
+        return rowError(name, row,
                         "frames out of order: frame " + std::to_string(frame) + " after frame " +
                             std::to_string(previous));
     return Ok{};
@@ -56,26 +58,35 @@ Status checkFrameOrder(const fs::path& path, const CsvRow& row, std::int64_t pre
 
 constexpr std::int64_t kNoFrameYet = -1;
 
+/// The file at \a path read whole and given to \a parse with its path as the name in errors.
+template <typename Parse>
+auto readWith(const fs::path& path, Parse parse) -> decltype(parse(std::string_view{}, "")) {
+    Result<std::string> text = readTextFile(path);
+    if (!text)
+        return text.error();
+    return parse(*text, path.string());
+}
+
 } // namespace
 
 // ---------------------------------------------------------------------------------------------
 // CSV files
 
-Result<std::vector<FrameRow>> readFrames(const fs::path& path) {
+Result<std::vector<FrameRow>> parseFrames(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 2> kColumns{
         {{"frame", ColumnType::Integer}, {"time_s", ColumnType::Real}}};
-    Result<CsvTable> table = readCsvFile(path, kColumns);
+    Result<CsvTable> table = parseCsv(text, name, kColumns);
     if (!table)
         return table.error();
     std::vector<FrameRow> rows;
     rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
-    double previousTime = -INFINITY;
+    double previousTime = -std::numeric_limits<double>::infinity();
     for (const CsvRow& row : table->rows) {
-        if (Status s = checkFrameOrder(path, row, previous, true); !s)
+        if (Status s = checkFrameOrder(name, row, previous, true); !s)
             return s.error();
         if (row[1] < previousTime)
-            return rowError(path, row, "time_s goes backwards");
+            return rowError(name, row, "time_s goes backwards");
         previous = row.integer(0);
         previousTime = row[1];
         rows.push_back({row.integer(0), row[1]});
@@ -83,25 +94,29 @@ Result<std::vector<FrameRow>> readFrames(const fs::path& path) {
     return rows;
 }
 
-Result<std::vector<BlobRow>> readBlobs(const fs::path& path) {
+Result<std::vector<FrameRow>> readFrames(const fs::path& path) {
+    return readWith(path, parseFrames);
+}
+
+Result<std::vector<BlobRow>> parseBlobs(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 5> kColumns{{{"frame", ColumnType::Integer},
                                                         {"camera", ColumnType::Integer},
                                                         {"u", ColumnType::Real},
                                                         {"v", ColumnType::Real},
                                                         {"area", ColumnType::Real, true}}};
-    Result<CsvTable> table = readCsvFile(path, kColumns);
+    Result<CsvTable> table = parseCsv(text, name, kColumns);
     if (!table)
         return table.error();
     std::vector<BlobRow> rows;
     rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
     for (const CsvRow& row : table->rows) {
-        if (Status s = checkFrameOrder(path, row, previous, false); !s)
+        if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         previous = row.integer(0);
         const std::int64_t camera = row.integer(1);
         if (camera != 0 && camera != 1)
-            return rowError(path, row, "camera must be 0 or 1, found " + std::to_string(camera));
+            return rowError(name, row, "camera must be 0 or 1, found " + std::to_string(camera));
         BlobRow blob;
         blob.frame = row.integer(0);
         blob.camera = static_cast<int>(camera);
@@ -109,7 +124,7 @@ Result<std::vector<BlobRow>> readBlobs(const fs::path& path) {
         blob.v_px = row[3];
         if (row.fieldCount == 5) {
             if (row[4] < 0.0)
-                return rowError(path, row, "area is negative");
+                return rowError(name, row, "area is negative");
             blob.area_px = row[4];
         }
         rows.push_back(blob);
@@ -117,13 +132,17 @@ Result<std::vector<BlobRow>> readBlobs(const fs::path& path) {
     return rows;
 }
 
-Result<std::vector<PointRow>> readPoints(const fs::path& path) {
+Result<std::vector<BlobRow>> readBlobs(const fs::path& path) {
+    return readWith(path, parseBlobs);
+}
+
+Result<std::vector<PointRow>> parsePoints(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 5> kColumns{{{"frame", ColumnType::Integer},
                                                         {"time_s", ColumnType::Real},
                                                         {"x", ColumnType::Real},
                                                         {"y", ColumnType::Real},
                                                         {"z", ColumnType::Real}}};
-    Result<CsvTable> table = readCsvFile(path, kColumns);
+    Result<CsvTable> table = parseCsv(text, name, kColumns);
     if (!table)
         return table.error();
     std::vector<PointRow> rows;
@@ -131,12 +150,12 @@ Result<std::vector<PointRow>> readPoints(const fs::path& path) {
     std::int64_t previous = kNoFrameYet;
     double previousTime = 0.0;
     for (const CsvRow& row : table->rows) {
-        if (Status s = checkFrameOrder(path, row, previous, false); !s)
+        if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         if (row.integer(0) == previous && row[1] != previousTime)
-            return rowError(path, row, "time_s differs from the frame's earlier rows");
+            return rowError(name, row, "time_s differs from the frame's earlier rows");
         if (row.integer(0) != previous && previous != kNoFrameYet && row[1] < previousTime)
-            return rowError(path, row, "time_s goes backwards");
+            return rowError(name, row, "time_s goes backwards");
         previous = row.integer(0);
         previousTime = row[1];
         rows.push_back({row.integer(0), row[1], Vec3{row[2], row[3], row[4]}});
@@ -144,7 +163,11 @@ Result<std::vector<PointRow>> readPoints(const fs::path& path) {
     return rows;
 }
 
-Result<std::vector<TruthRow>> readTruth(const fs::path& path) {
+Result<std::vector<PointRow>> readPoints(const fs::path& path) {
+    return readWith(path, parsePoints);
+}
+
+Result<std::vector<TruthRow>> parseTruth(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 10> kColumns{{{"frame", ColumnType::Integer},
                                                          {"time_s", ColumnType::Real},
                                                          {"object", ColumnType::Integer},
@@ -155,23 +178,23 @@ Result<std::vector<TruthRow>> readTruth(const fs::path& path) {
                                                          {"qx", ColumnType::Real},
                                                          {"qy", ColumnType::Real},
                                                          {"qz", ColumnType::Real}}};
-    Result<CsvTable> table = readCsvFile(path, kColumns);
+    Result<CsvTable> table = parseCsv(text, name, kColumns);
     if (!table)
         return table.error();
     std::vector<TruthRow> rows;
     rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
     for (const CsvRow& row : table->rows) {
-        if (Status s = checkFrameOrder(path, row, previous, false); !s)
+        if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         previous = row.integer(0);
         if (row.integer(2) < 0)
-            return rowError(path, row, "object id is negative");
+            return rowError(name, row, "object id is negative");
         const double norm =
             std::sqrt(row[6] * row[6] + row[7] * row[7] + row[8] * row[8] + row[9] * row[9]);
         // Six printed digits per component keep the norm within 1e-5 of one; allow for that.
         if (std::abs(norm - 1.0) > 1e-4)
-            return rowError(path, row,
+            return rowError(name, row,
                             "quaternion is not unit (norm " + std::to_string(norm) + ")");
         TruthRow truth;
         truth.frame = row.integer(0);
@@ -184,25 +207,33 @@ Result<std::vector<TruthRow>> readTruth(const fs::path& path) {
     return rows;
 }
 
-Result<std::vector<TruthMarker>> readObjectMarkers(const fs::path& path) {
+Result<std::vector<TruthRow>> readTruth(const fs::path& path) {
+    return readWith(path, parseTruth);
+}
+
+Result<std::vector<TruthMarker>> parseObjectMarkers(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 4> kColumns{{{"marker", ColumnType::Integer},
                                                         {"x", ColumnType::Real},
                                                         {"y", ColumnType::Real},
                                                         {"z", ColumnType::Real}}};
-    Result<CsvTable> table = readCsvFile(path, kColumns);
+    Result<CsvTable> table = parseCsv(text, name, kColumns);
     if (!table)
         return table.error();
     std::vector<TruthMarker> markers;
     markers.reserve(table->rows.size());
     for (const CsvRow& row : table->rows) {
         if (row.integer(0) < 0)
-            return rowError(path, row, "marker id is negative");
+            return rowError(name, row, "marker id is negative");
         for (const TruthMarker& m : markers)
             if (m.marker == row.integer(0))
-                return rowError(path, row, "marker " + std::to_string(m.marker) + " appears twice");
+                return rowError(name, row, "marker " + std::to_string(m.marker) + " appears twice");
         markers.push_back({static_cast<int>(row.integer(0)), Vec3{row[1], row[2], row[3]}});
     }
     return markers;
+}
+
+Result<std::vector<TruthMarker>> readObjectMarkers(const fs::path& path) {
+    return readWith(path, parseObjectMarkers);
 }
 
 Status writeFrames(const fs::path& path, const std::vector<FrameRow>& rows) {
@@ -380,13 +411,10 @@ private:
 
 Result<StereoRig> parseRig(std::string_view text, std::string_view name) {
     const RigParser parser(name);
-    toml::parse_result parsed = toml::parse(text, name);
-    if (!parsed) {
-        const toml::parse_error& e = parsed.error();
-        return Error{std::string(name) + ":" + std::to_string(e.source().begin.line) + ": " +
-                     std::string(e.description())};
-    }
-    const toml::table& root = parsed.table();
+    const Result<toml::table> parsed = parseTomlDocument(text, name);
+    if (!parsed)
+        return parsed.error();
+    const toml::table& root = *parsed;
     const toml::array* cameras = root["camera"].as_array();
     if (cameras == nullptr)
         return parser.atFile("missing [[camera]] tables");

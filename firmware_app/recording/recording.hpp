@@ -69,11 +69,18 @@ Result<StereoRig> readRig(const std::filesystem::path& path);
 Result<StereoRig> parseRig(std::string_view text, std::string_view name);
 Status writeRig(const std::filesystem::path& path, const StereoRig& rig);
 
+/// \brief The CSV tables (INTERFACES section 1): read*() reads the file, parse*() its text, with
+/// \a name leading every error.
 Result<std::vector<FrameRow>> readFrames(const std::filesystem::path& path);
+Result<std::vector<FrameRow>> parseFrames(std::string_view text, std::string_view name);
 Result<std::vector<BlobRow>> readBlobs(const std::filesystem::path& path);
+Result<std::vector<BlobRow>> parseBlobs(std::string_view text, std::string_view name);
 Result<std::vector<PointRow>> readPoints(const std::filesystem::path& path);
+Result<std::vector<PointRow>> parsePoints(std::string_view text, std::string_view name);
 Result<std::vector<TruthRow>> readTruth(const std::filesystem::path& path);
+Result<std::vector<TruthRow>> parseTruth(std::string_view text, std::string_view name);
 Result<std::vector<TruthMarker>> readObjectMarkers(const std::filesystem::path& path);
+Result<std::vector<TruthMarker>> parseObjectMarkers(std::string_view text, std::string_view name);
 
 Status writeFrames(const std::filesystem::path& path, const std::vector<FrameRow>& rows);
 /// \brief Writes the area column when \a withArea is true (rows without an area write 0).

@@ -109,6 +109,11 @@ TEST(Dtrack, RefusesMalformedDatagrams) {
     EXPECT_FALSE(parseDtrack("fr 1\r\n6d 1 [0 1.0][1 2 3][2 0 0 0 1 0 0 0 1]\r\n"));
     EXPECT_FALSE(parseDtrack("fr 1\r\nts2 1 2\r\n"));
     EXPECT_FALSE(parseDtrack("fr 1\r\nts2 1 1000000 5\r\n"));
+    // Counts and ids that no integer holds (found by tests/fuzz: casting them was undefined).
+    EXPECT_FALSE(parseDtrack("fr 1\r\n3d 1.7e61\r\n"));
+    EXPECT_FALSE(parseDtrack("fr 1\r\n6d -1\r\n"));
+    EXPECT_FALSE(parseDtrack("fr 1\r\n3d 1 [-5 1.0][1 2 3]\r\n"));
+    EXPECT_FALSE(parseDtrack("fr 1\r\n3d 1 [1e20 1.0][1 2 3]\r\n"));
 }
 
 TEST(Dtrack, SendsTheMarkerLineInEveryFrameAndTheLatencyInTs2) {

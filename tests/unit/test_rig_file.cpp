@@ -134,6 +134,16 @@ TEST(RigFile, TomlSyntaxErrorNamesTheLine) {
     EXPECT_EQ(message.rfind("rec/rig.toml:12: ", 0), 0u) << message;
 }
 
+// toml++ 3.3 asserts preconditions its parser breaks on these (found by tests/fuzz): a debug or
+// sanitizer build aborted, a clang release build had undefined behaviour. They are errors.
+TEST(RigFile, TextTheTomlLibraryOnceAbortedOnIsAnError) {
+    for (const char* text : {"[@camera]]\nwidth = 1\n", "[[[1]]]\n", "[[=\n",
+                             "rotation = [0.9, [-0, 0.2, 0,} 0.9]\n"}) {
+        const std::string message = errorOf(std::string(kCamera0) + text);
+        EXPECT_EQ(message.rfind("rec/rig.toml:", 0), 0u) << text << ": " << message;
+    }
+}
+
 TEST(RigFile, CamerasAtOnePoint) {
     std::string text = std::string(kCamera0) + camera1();
     replaceFirst(text, "[-120.0, 0.0, 0.0]", "[0.0, 0.0, 0.0]");
