@@ -17,6 +17,7 @@ apt_install() { apt-get install -y -q --no-install-recommends "$@"; }
 
 host_packages=(
     build-essential cmake ninja-build pkg-config git clang-format
+    clang
     libeigen3-dev libtomlplusplus-dev libcli11-dev libsimde-dev nlohmann-json3-dev
     zlib1g-dev libsystemd-dev libgpiod-dev libcamera-dev
     libopencv-imgproc-dev
