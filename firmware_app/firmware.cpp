@@ -113,7 +113,7 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
     models_.reserve(config.maxModels);
     filters_.assign(config.maxModels, PoseFilter(config.filter));
     outputPoses_.resize(config.maxModels);
-    queue_.resize(config.cameras.queueDepth);
+    queue_ = RingBuffer<Queued>(config.cameras.queueDepth);
     dtrackBodies_.reserve(config.maxModels);
     dtrackMarkers_.reserve(kMaxPreviewMarkers);
     datagram_.resize(kDatagramBytes);
@@ -378,10 +378,7 @@ void Firmware::step() {
         return;
     }
     capture();
-    if (queueSize_ > 0) {
-        const Queued next = queue_[queueHead_];
-        queueHead_ = (queueHead_ + 1) % queue_.size();
-        --queueSize_;
+    if (Queued next; queue_.pop(next)) {
         process(next.frame, next.acquiredAt, next.acquiredHost_ns);
         board_.cameras.release(next.frame);
     }
@@ -392,7 +389,7 @@ void Firmware::step() {
 void Firmware::capture() {
     const hal::Nanoseconds period = board_.cameras.framePeriod();
     // Wait for a frame only when there is nothing to process: capture never waits on processing.
-    const hal::Nanoseconds wait = queueSize_ > 0 ? 0 : period + period / 2;
+    const hal::Nanoseconds wait = queue_.empty() ? period + period / 2 : 0;
     hal::StereoFrame frame;
     hal::AcquireStatus status = board_.cameras.acquire(frame, wait);
     bool any = false;
@@ -417,15 +414,14 @@ void Firmware::capture() {
 }
 
 void Firmware::enqueue(const Queued& queued) {
-    if (queueSize_ == queue_.size()) {
-        // Drop the oldest: the newest exposure is the one worth processing.
-        board_.cameras.release(queue_[queueHead_].frame);
-        queueHead_ = (queueHead_ + 1) % queue_.size();
-        --queueSize_;
+    // Drop the oldest: the newest exposure is the one worth processing. Its buffers go back to
+    // the cameras first.
+    if (Queued oldest; queue_.full() && queue_.pop(oldest)) {
+        board_.cameras.release(oldest.frame);
         ++counters_.framesDroppedQueue;
     }
-    queue_[(queueHead_ + queueSize_) % queue_.size()] = queued;
-    ++queueSize_;
+    if (!queue_.tryPush(queued)) // a queue of depth 0: the frame is dropped at once
+        board_.cameras.release(queued.frame);
 }
 
 void Firmware::scheduleStrobe(const hal::StereoFrame& frame) {
@@ -617,11 +613,8 @@ void Firmware::drainCanErrors() {
 
 void Firmware::enterDegraded(const char* why) {
     // Frames go back before the stream stops: a backend frees its buffers when it stops.
-    while (queueSize_ > 0) {
-        board_.cameras.release(queue_[queueHead_].frame);
-        queueHead_ = (queueHead_ + 1) % queue_.size();
-        --queueSize_;
-    }
+    for (Queued queued; queue_.pop(queued);)
+        board_.cameras.release(queued.frame);
     board_.cameras.stop();
     cameraStarted_ = false;
     if (state_ == FirmwareState::Calibrating)

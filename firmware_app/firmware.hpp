@@ -13,6 +13,7 @@
 #include "core/calibration_session.hpp"
 #include "core/model_tracker.hpp"
 #include "core/pose_filter.hpp"
+#include "core/ring_buffer.hpp"
 #include "core/stereo_matcher.hpp"
 #include "firmware_app/button_input.hpp"
 #include "firmware_app/calibration_finisher.hpp"
@@ -229,9 +230,7 @@ private:
         hal::Nanoseconds acquiredAt = 0;
         std::int64_t acquiredHost_ns = 0;
     };
-    std::vector<Queued> queue_;
-    std::size_t queueHead_ = 0;
-    std::size_t queueSize_ = 0;
+    RingBuffer<Queued> queue_{0};
 
     // Outputs.
     std::vector<DtrackBody> dtrackBodies_;
