@@ -118,7 +118,7 @@ LibcameraCameraPair::LibcameraCameraPair(LibcameraPairConfig config)
     managerStarted_ = true;
     slots_.resize(static_cast<std::size_t>(config_.buffers));
     for (Side& side : sides_)
-        side.completed.resize(static_cast<std::size_t>(config_.buffers));
+        side.completed = RingBuffer<Completed>(static_cast<std::size_t>(config_.buffers));
 }
 
 LibcameraCameraPair::~LibcameraCameraPair() {
@@ -320,7 +320,7 @@ void LibcameraCameraPair::stopSides() {
                 side.camera->release();
         }
         side = Side{};
-        side.completed.resize(slots_.size());
+        side.completed = RingBuffer<Completed>(slots_.size());
     }
     std::lock_guard lock(mutex_);
     for (PairSlot& slot : slots_)
@@ -379,8 +379,7 @@ void LibcameraCameraPair::onRequestCompleted(int index, libcamera::Request* requ
     side.sequenceKnown = true;
     side.lastSequence = timing.sequence;
     // At most one entry per buffer, so the ring (one slot per buffer) cannot overflow.
-    side.completed[(side.completedHead + side.completedCount) % side.completed.size()] = completed;
-    ++side.completedCount;
+    side.completed.tryPush(completed);
     frameArrived_.notify_all();
 }
 
@@ -417,9 +416,8 @@ hal::AcquireStatus LibcameraCameraPair::fail() {
 
 LibcameraCameraPair::Completed LibcameraCameraPair::popCompleted(int index) {
     Side& side = sides_[static_cast<std::size_t>(index)];
-    const Completed front = side.completed[side.completedHead];
-    side.completedHead = (side.completedHead + 1) % side.completed.size();
-    --side.completedCount;
+    Completed front;
+    side.completed.pop(front);
     return front;
 }
 
@@ -434,11 +432,9 @@ hal::AcquireStatus LibcameraCameraPair::acquire(hal::StereoFrame& frame, hal::Na
             return hal::AcquireStatus::Stopped;
         if (failed_)
             return fail();
-        while (sides_[0].completedCount > 0 && sides_[1].completedCount > 0) {
-            const hal::Nanoseconds midA =
-                sides_[0].completed[sides_[0].completedHead].frame.midExposure();
-            const hal::Nanoseconds midB =
-                sides_[1].completed[sides_[1].completedHead].frame.midExposure();
+        while (!sides_[0].completed.empty() && !sides_[1].completed.empty()) {
+            const hal::Nanoseconds midA = sides_[0].completed.front().frame.midExposure();
+            const hal::Nanoseconds midB = sides_[1].completed.front().frame.midExposure();
             if (std::abs(midA - midB) <= pairTolerance_) {
                 pair = {popCompleted(0), popCompleted(1)};
                 break;

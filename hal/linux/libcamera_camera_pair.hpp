@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/ring_buffer.hpp"
 #include "hal/camera_pair.hpp"
 #include "hal/linux/posix_clock.hpp"
 
@@ -144,9 +145,7 @@ private:
         bool acquired = false;
         bool started = false;
         /// Completed requests not yet paired, oldest first (a ring of `buffers` entries).
-        std::vector<Completed> completed;
-        std::size_t completedHead = 0;
-        std::size_t completedCount = 0;
+        RingBuffer<Completed> completed{0};
         bool sequenceKnown = false;
         std::uint64_t lastSequence = 0;
         /// When this camera last completed a request (CLOCK_MONOTONIC), or started.
