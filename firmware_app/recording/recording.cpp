@@ -1,5 +1,5 @@
-// Reading and writing recording directories (INTERFACES §1-2): rig, frames, images, blobs, points,
-// truth.
+// Reading and writing recording directories (INTERFACES §1): frames, images, blobs, points, truth
+// (rig.toml is rig_file.cpp's).
 #include "firmware_app/recording/recording.hpp"
 
 #include <array>
@@ -8,11 +8,9 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
-
-#include <toml++/toml.h>
+#include <set>
 
 #include "firmware_app/recording/csv.hpp"
-#include "firmware_app/recording/toml_document.hpp"
 
 namespace edgetrack::recording {
 
@@ -67,6 +65,25 @@ auto readWith(const fs::path& path, Parse parse) -> decltype(parse(std::string_v
     return parse(*text, path.string());
 }
 
+/// The rows of a table with \a columns, each made a T by \a convert (which may refuse it with an
+/// error, and may keep state from row to row: frame order).
+template <typename T, std::size_t N, typename Convert>
+Result<std::vector<T>> parseRows(std::string_view text, std::string_view name,
+                                 const std::array<CsvColumn, N>& columns, Convert convert) {
+    Result<CsvTable> table = parseCsv(text, name, columns);
+    if (!table)
+        return table.error();
+    std::vector<T> rows;
+    rows.reserve(table->rows.size());
+    for (const CsvRow& row : table->rows) {
+        Result<T> converted = convert(row);
+        if (!converted)
+            return converted.error();
+        rows.push_back(std::move(*converted));
+    }
+    return rows;
+}
+
 } // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -75,23 +92,17 @@ auto readWith(const fs::path& path, Parse parse) -> decltype(parse(std::string_v
 Result<std::vector<FrameRow>> parseFrames(std::string_view text, std::string_view name) {
     static constexpr std::array<CsvColumn, 2> kColumns{
         {{"frame", ColumnType::Integer}, {"time_s", ColumnType::Real}}};
-    Result<CsvTable> table = parseCsv(text, name, kColumns);
-    if (!table)
-        return table.error();
-    std::vector<FrameRow> rows;
-    rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
     double previousTime = -std::numeric_limits<double>::infinity();
-    for (const CsvRow& row : table->rows) {
+    return parseRows<FrameRow>(text, name, kColumns, [&](const CsvRow& row) -> Result<FrameRow> {
         if (Status s = checkFrameOrder(name, row, previous, true); !s)
             return s.error();
         if (row[1] < previousTime)
             return rowError(name, row, "time_s goes backwards");
         previous = row.integer(0);
         previousTime = row[1];
-        rows.push_back({row.integer(0), row[1]});
-    }
-    return rows;
+        return FrameRow{row.integer(0), row[1]};
+    });
 }
 
 Result<std::vector<FrameRow>> readFrames(const fs::path& path) {
@@ -104,13 +115,8 @@ Result<std::vector<BlobRow>> parseBlobs(std::string_view text, std::string_view 
                                                         {"u", ColumnType::Real},
                                                         {"v", ColumnType::Real},
                                                         {"area", ColumnType::Real, true}}};
-    Result<CsvTable> table = parseCsv(text, name, kColumns);
-    if (!table)
-        return table.error();
-    std::vector<BlobRow> rows;
-    rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
-    for (const CsvRow& row : table->rows) {
+    return parseRows<BlobRow>(text, name, kColumns, [&](const CsvRow& row) -> Result<BlobRow> {
         if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         previous = row.integer(0);
@@ -127,9 +133,8 @@ Result<std::vector<BlobRow>> parseBlobs(std::string_view text, std::string_view 
                 return rowError(name, row, "area is negative");
             blob.area_px = row[4];
         }
-        rows.push_back(blob);
-    }
-    return rows;
+        return blob;
+    });
 }
 
 Result<std::vector<BlobRow>> readBlobs(const fs::path& path) {
@@ -142,14 +147,9 @@ Result<std::vector<PointRow>> parsePoints(std::string_view text, std::string_vie
                                                         {"x", ColumnType::Real},
                                                         {"y", ColumnType::Real},
                                                         {"z", ColumnType::Real}}};
-    Result<CsvTable> table = parseCsv(text, name, kColumns);
-    if (!table)
-        return table.error();
-    std::vector<PointRow> rows;
-    rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
     double previousTime = 0.0;
-    for (const CsvRow& row : table->rows) {
+    return parseRows<PointRow>(text, name, kColumns, [&](const CsvRow& row) -> Result<PointRow> {
         if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         if (row.integer(0) == previous && row[1] != previousTime)
@@ -158,9 +158,8 @@ Result<std::vector<PointRow>> parsePoints(std::string_view text, std::string_vie
             return rowError(name, row, "time_s goes backwards");
         previous = row.integer(0);
         previousTime = row[1];
-        rows.push_back({row.integer(0), row[1], Vec3{row[2], row[3], row[4]}});
-    }
-    return rows;
+        return PointRow{row.integer(0), row[1], Vec3{row[2], row[3], row[4]}};
+    });
 }
 
 Result<std::vector<PointRow>> readPoints(const fs::path& path) {
@@ -178,13 +177,8 @@ Result<std::vector<TruthRow>> parseTruth(std::string_view text, std::string_view
                                                          {"qx", ColumnType::Real},
                                                          {"qy", ColumnType::Real},
                                                          {"qz", ColumnType::Real}}};
-    Result<CsvTable> table = parseCsv(text, name, kColumns);
-    if (!table)
-        return table.error();
-    std::vector<TruthRow> rows;
-    rows.reserve(table->rows.size());
     std::int64_t previous = kNoFrameYet;
-    for (const CsvRow& row : table->rows) {
+    return parseRows<TruthRow>(text, name, kColumns, [&](const CsvRow& row) -> Result<TruthRow> {
         if (Status s = checkFrameOrder(name, row, previous, false); !s)
             return s.error();
         previous = row.integer(0);
@@ -202,9 +196,8 @@ Result<std::vector<TruthRow>> parseTruth(std::string_view text, std::string_view
         truth.object = static_cast<int>(row.integer(2));
         truth.T_rig_from_object.translation_mm = {row[3], row[4], row[5]};
         truth.T_rig_from_object.rotation = quaternionFromWxyz(row[6], row[7], row[8], row[9]);
-        rows.push_back(truth);
-    }
-    return rows;
+        return truth;
+    });
 }
 
 Result<std::vector<TruthRow>> readTruth(const fs::path& path) {
@@ -216,20 +209,16 @@ Result<std::vector<TruthMarker>> parseObjectMarkers(std::string_view text, std::
                                                         {"x", ColumnType::Real},
                                                         {"y", ColumnType::Real},
                                                         {"z", ColumnType::Real}}};
-    Result<CsvTable> table = parseCsv(text, name, kColumns);
-    if (!table)
-        return table.error();
-    std::vector<TruthMarker> markers;
-    markers.reserve(table->rows.size());
-    for (const CsvRow& row : table->rows) {
-        if (row.integer(0) < 0)
-            return rowError(name, row, "marker id is negative");
-        for (const TruthMarker& m : markers)
-            if (m.marker == row.integer(0))
-                return rowError(name, row, "marker " + std::to_string(m.marker) + " appears twice");
-        markers.push_back({static_cast<int>(row.integer(0)), Vec3{row[1], row[2], row[3]}});
-    }
-    return markers;
+    std::set<std::int64_t> seen;
+    return parseRows<TruthMarker>(
+        text, name, kColumns, [&](const CsvRow& row) -> Result<TruthMarker> {
+            if (row.integer(0) < 0)
+                return rowError(name, row, "marker id is negative");
+            if (!seen.insert(row.integer(0)).second)
+                return rowError(name, row,
+                                "marker " + std::to_string(row.integer(0)) + " appears twice");
+            return TruthMarker{static_cast<int>(row.integer(0)), Vec3{row[1], row[2], row[3]}};
+        });
 }
 
 Result<std::vector<TruthMarker>> readObjectMarkers(const fs::path& path) {
@@ -279,212 +268,6 @@ Status writeObjectMarkers(const fs::path& path, const std::vector<TruthMarker>& 
     for (const TruthMarker& m : markers)
         appendCsvLine(out, std::int64_t{m.marker}, m.position_object_mm.x(),
                       m.position_object_mm.y(), m.position_object_mm.z());
-    return writeTextFileAtomically(path, out);
-}
-
-// ---------------------------------------------------------------------------------------------
-// rig.toml
-
-namespace {
-
-class RigParser {
-public:
-    RigParser(std::string_view name)
-        : name_(name) {}
-
-    Error at(const toml::node& node, const std::string& key, const std::string& what) const {
-        return Error{name_ + ":" + std::to_string(node.source().begin.line) + ": " + key + ": " +
-                     what};
-    }
-    Error atFile(const std::string& what) const { return Error{name_ + ": " + what}; }
-
-    Result<double> number(const toml::table& table, const toml::node& where,
-                          const std::string& prefix, const char* key) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        std::optional<double> value;
-        if (node->is_floating_point())
-            value = node->value<double>();
-        else if (node->is_integer())
-            value = static_cast<double>(*node->value<std::int64_t>());
-        if (!value)
-            return at(*node, prefix + key, "expected a number");
-        if (!std::isfinite(*value))
-            return at(*node, prefix + key, "NaN and infinity are not allowed");
-        return *value;
-    }
-
-    Result<int> positiveInteger(const toml::table& table, const toml::node& where,
-                                const std::string& prefix, const char* key) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        if (!node->is_integer())
-            return at(*node, prefix + key, "expected an integer");
-        const std::int64_t value = *node->value<std::int64_t>();
-        if (value <= 0 || value > 65535)
-            return at(*node, prefix + key, "must be between 1 and 65535");
-        return static_cast<int>(value);
-    }
-
-    template <std::size_t N>
-    Status numbers(const toml::table& table, const toml::node& where, const std::string& prefix,
-                   const char* key, std::array<double, N>& out) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        const toml::array* array = node->as_array();
-        if (array == nullptr || array->size() != N)
-            return at(*node, prefix + key,
-                      "expected an array of " + std::to_string(N) + " numbers");
-        for (std::size_t i = 0; i < N; ++i) {
-            const toml::node* entry = array->get(i);
-            if (entry == nullptr)
-                return at(*node, prefix + key, "element " + std::to_string(i) + " is missing");
-            const toml::node& element = *entry;
-            std::optional<double> value;
-            if (element.is_floating_point())
-                value = element.value<double>();
-            else if (element.is_integer())
-                value = static_cast<double>(*element.value<std::int64_t>());
-            if (!value)
-                return at(element, prefix + key,
-                          "element " + std::to_string(i) + " is not a number");
-            if (!std::isfinite(*value))
-                return at(element, prefix + key, "NaN and infinity are not allowed");
-            out[i] = *value;
-        }
-        return Ok{};
-    }
-
-    Result<CameraModel> camera(const toml::table& table, std::size_t index) const {
-        const std::string prefix = "camera[" + std::to_string(index) + "].";
-        CameraIntrinsics in;
-        CameraExtrinsics ex;
-
-        Result<int> width = positiveInteger(table, table, prefix, "width");
-        if (!width)
-            return width.error();
-        Result<int> height = positiveInteger(table, table, prefix, "height");
-        if (!height)
-            return height.error();
-        in.width_px = *width;
-        in.height_px = *height;
-
-        std::array<double*, 4> targets{&in.fx_px, &in.fy_px, &in.cx_px, &in.cy_px};
-        std::array<const char*, 4> keys{"fx", "fy", "cx", "cy"};
-        for (std::size_t i = 0; i < keys.size(); ++i) {
-            Result<double> v = number(table, table, prefix, keys[i]);
-            if (!v)
-                return v.error();
-            *targets[i] = *v;
-        }
-        if (in.fx_px <= 0.0)
-            return at(*table.get("fx"), prefix + "fx", "must be positive");
-        if (in.fy_px <= 0.0)
-            return at(*table.get("fy"), prefix + "fy", "must be positive");
-
-        if (Status s = numbers(table, table, prefix, "distortion", in.distortion); !s)
-            return s.error();
-        std::array<double, 9> r{};
-        if (Status s = numbers(table, table, prefix, "rotation", r); !s)
-            return s.error();
-        std::array<double, 3> t{};
-        if (Status s = numbers(table, table, prefix, "translation", t); !s)
-            return s.error();
-        ex.rotation_cam_from_rig << r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8];
-        ex.translation_cam_from_rig_mm = {t[0], t[1], t[2]};
-
-        CameraModel model(in, ex);
-        if (!model.isValid())
-            return at(*table.get("rotation"), prefix + "rotation",
-                      "not a proper rotation matrix (row-major, orthonormal, det +1)");
-        return model;
-    }
-
-private:
-    std::string name_;
-};
-
-} // namespace
-
-Result<StereoRig> parseRig(std::string_view text, std::string_view name) {
-    const RigParser parser(name);
-    const Result<toml::table> parsed = parseTomlDocument(text, name);
-    if (!parsed)
-        return parsed.error();
-    const toml::table& root = *parsed;
-    const toml::array* cameras = root["camera"].as_array();
-    if (cameras == nullptr)
-        return parser.atFile("missing [[camera]] tables");
-    if (cameras->size() != 2)
-        return parser.atFile("expected 2 [[camera]] tables, found " +
-                             std::to_string(cameras->size()));
-    std::array<CameraModel, 2> models;
-    for (std::size_t i = 0; i < 2; ++i) {
-        const toml::node* entry = cameras->get(i);
-        const toml::table* table = entry != nullptr ? entry->as_table() : nullptr;
-        if (table == nullptr)
-            return parser.atFile("camera[" + std::to_string(i) + "] is not a table");
-        Result<CameraModel> model = parser.camera(*table, i);
-        if (!model)
-            return model.error();
-        models[i] = *model;
-    }
-    StereoRig rig(models[0], models[1]);
-    if (!rig.isValid())
-        return parser.atFile("the two cameras share one optical centre or look along the baseline");
-    return rig;
-}
-
-Result<StereoRig> readRig(const fs::path& path) {
-    Result<std::string> text = readTextFile(path);
-    if (!text)
-        return text.error();
-    return parseRig(*text, path.string());
-}
-
-Status writeRig(const fs::path& path, const StereoRig& rig) {
-    std::string out =
-        "# stereo rig; camera 0 defines the rig frame (x right, y down, z forward, mm)\n";
-    auto list = [&out](const double* values, std::size_t count) {
-        out += "[";
-        for (std::size_t i = 0; i < count; ++i) {
-            if (i > 0)
-                out += ", ";
-            appendNumber(out, values[i]);
-        }
-        out += "]\n";
-    };
-    for (const CameraModel& camera : rig.cameras()) {
-        const CameraIntrinsics& in = camera.intrinsics();
-        const CameraExtrinsics& ex = camera.extrinsics();
-        out += "\n[[camera]]\nwidth = " + std::to_string(in.width_px) +
-               "\nheight = " + std::to_string(in.height_px) + "\n";
-        const std::array<std::pair<const char*, double>, 4> scalars{
-            {{"fx", in.fx_px}, {"fy", in.fy_px}, {"cx", in.cx_px}, {"cy", in.cy_px}}};
-        for (const auto& [key, value] : scalars) {
-            out += key;
-            out += " = ";
-            // TOML needs a decimal point for a float; to_chars omits it for whole numbers.
-            std::string number;
-            appendNumber(number, value);
-            if (number.find_first_of(".eE") == std::string::npos)
-                number += ".0";
-            out += number + "\n";
-        }
-        out += "distortion = ";
-        list(in.distortion.data(), 5);
-        std::array<double, 9> r{};
-        for (int row = 0; row < 3; ++row)
-            for (int col = 0; col < 3; ++col)
-                r[static_cast<std::size_t>(row * 3 + col)] = ex.rotation_cam_from_rig(row, col);
-        out += "rotation = ";
-        list(r.data(), 9);
-        out += "translation = ";
-        list(ex.translation_cam_from_rig_mm.data(), 3);
-    }
     return writeTextFileAtomically(path, out);
 }
 
