@@ -165,8 +165,6 @@ private:
         /// Co-visible marker pairs (a < b).
         std::vector<std::pair<std::uint16_t, std::uint16_t>> edges;
         std::vector<RigidTransform> T_rig_from_body;
-        /// Per frame: kNotPosed, kPosed (by the tracker, or followed on from such a pose) or
-        /// kPosedFromTriangle.
         std::vector<std::uint8_t> posed;
         /// Its poses when tracked with no other body: where pieces of one object share markers,
         /// the joint tracker gives the shared points to one of them, and the other goes unposed.
@@ -176,9 +174,6 @@ private:
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
     };
-    static constexpr std::uint8_t kNotPosed = 0;
-    static constexpr std::uint8_t kPosed = 1;
-    static constexpr std::uint8_t kPosedFromTriangle = 2;
     struct Site {
         Vec3 sum_mm = Vec3::Zero();
         std::uint32_t hits = 0;
@@ -200,7 +195,7 @@ private:
     /// poses go to \a tracks[k].
     void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,
                        std::span<const PoseTrack> tracks);
-    /// \brief Every alive body posed, in the frames the tracker did not find it, from three free
+    /// \brief Every alive body posed, in the frames the tracker did not find it, from three
     /// points that match a triangle of its layout that no other triangle of any body resembles.
     void poseFromTriangles(const SessionBuffer& session);
     void poseFromTriangles(const SessionBuffer& session, Body& body,

@@ -19,8 +19,6 @@ using namespace completion_detail;
 namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
-/// Directions a place was seen from that are kept (thinned to half the same-view angle).
-constexpr std::size_t kMaxViewDirections = 256;
 /// A place holds points within this many times the median distance of an object's points from
 /// its markers: for a 3D normal scatter the median distance is 1.5 sigma, so 3 times it holds all
 /// but one point in a thousand.
@@ -197,17 +195,10 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
                         continue;
                     ++seen[k];
                     hitNow.push_back(k);
-                    const bool known =
-                        std::any_of(directions.begin(), directions.end(),
-                                    [&](const Vec3& d) { return d.dot(view) >= thinning; });
-                    if (!known && directions.size() < kMaxViewDirections)
-                        directions.push_back(view);
+                    keepViewDirection(directions, view, thinning);
                     continue;
                 }
-                const bool seenFromHere =
-                    std::any_of(directions.begin(), directions.end(),
-                                [&](const Vec3& d) { return d.dot(view) >= sameView; });
-                if (seenFromHere) {
+                if (seenFromNear(directions, view, sameView)) {
                     ++expected[k];
                     seenWhenExpected[k] += isHit ? 1U : 0U;
                 }

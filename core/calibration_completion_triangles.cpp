@@ -12,13 +12,6 @@ namespace edgetrack {
 
 using namespace completion_detail;
 
-namespace {
-
-/// Directions kept per marker for the view check.
-constexpr std::size_t kMaxTriangleViews = 256;
-
-} // namespace
-
 // ---------------------------------------------------------------------------------------------
 // Poses from three markers
 
@@ -76,6 +69,7 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
     const double tol = config_.triangleTolerance_mm;
     const double longest = own.back().sides_mm[2] + tol;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    const Extent ball = extentOf(body.markers_mm);
 
     // The directions each marker was seen from in the frames posed so far (body frame, thinned).
     // Three points of something else that match a triangle by chance put the body in a random
@@ -94,19 +88,12 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
             if (nearestPoint(session.points(f), rigFromBody.apply(body.markers_mm[m]), radius) ==
                 nullptr)
                 continue;
-            const Vec3 view = (viewpoint - body.markers_mm[m]).normalized();
-            std::vector<Vec3>& directions = seenFrom[m];
-            if (directions.size() < kMaxTriangleViews &&
-                std::none_of(directions.begin(), directions.end(),
-                             [&](const Vec3& d) { return d.dot(view) >= thinning; }))
-                directions.push_back(view);
+            keepViewDirection(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), thinning);
         }
     }
     auto seenFromHere = [&](const RigidTransform& rigFromBody, std::uint32_t m) {
         const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
-        const Vec3 view = (viewpoint - body.markers_mm[m]).normalized();
-        return std::any_of(seenFrom[m].begin(), seenFrom[m].end(),
-                           [&](const Vec3& d) { return d.dot(view) >= sameView; });
+        return seenFromNear(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), sameView);
     };
 
     // Points another body's pose explains are looked at too: where two pieces of one object
@@ -156,8 +143,7 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
                             best = fit->transform;
                             tie = false;
                         } else if (support == bestSupport && best &&
-                                   disagreement_mm(*best, fit->transform,
-                                                   extentOf(body.markers_mm)) > radius) {
+                                   disagreement_mm(*best, fit->transform, ball) > radius) {
                             tie = true;
                         }
                     }
@@ -172,7 +158,6 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
     // Three points that happen to fit a triangle for a frame or two pose nothing: only a run of
     // frames, posed so or by the tracker, whose poses follow on from each other as a moving body's
     // do, is taken.
-    const Extent ball = extentOf(body.markers_mm);
     auto poseAt = [&](std::size_t f) -> const RigidTransform& {
         return seeded[f] ? seed[f] : body.T_rig_from_body[f];
     };
@@ -188,7 +173,7 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
         if (end - f >= config_.minTriangleRun)
             for (std::size_t g = f; g < end; ++g)
                 if (seeded[g]) {
-                    body.posed[g] = kPosedFromTriangle;
+                    body.posed[g] = 1;
                     body.T_rig_from_body[g] = seed[g];
                     ++counters_.framesFromTriangles;
                 }

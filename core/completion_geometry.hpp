@@ -1,10 +1,12 @@
 // Geometry the completion steps share: extents, transform agreement, layout registration.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/rigid_transform.hpp"
 
@@ -80,6 +82,25 @@ bool congruent(const SortedTriangle& a, const SortedTriangle& b, double toleranc
 /// Whether its corners can be told apart by its sides at \a tolerance_mm, and it is tall enough
 /// over its longest side to fix a turn about it.
 bool wellShaped(const SortedTriangle& t, double tolerance_mm);
+
+/// Directions one place was seen from (body frame, unit vectors) that are kept at most.
+constexpr std::size_t kMaxViewDirections = 256;
+
+/// \brief \a view kept among \a directions unless one of them lies within the angle whose cosine is
+/// \a thinning, or kMaxViewDirections are kept already.
+inline void keepViewDirection(std::vector<Vec3>& directions, const Vec3& view, double thinning) {
+    if (directions.size() < kMaxViewDirections &&
+        std::none_of(directions.begin(), directions.end(),
+                     [&](const Vec3& d) { return d.dot(view) >= thinning; }))
+        directions.push_back(view);
+}
+
+/// \brief Whether one of \a directions lies within the angle whose cosine is \a sameView of \a
+/// view.
+inline bool seenFromNear(std::span<const Vec3> directions, const Vec3& view, double sameView) {
+    return std::any_of(directions.begin(), directions.end(),
+                       [&](const Vec3& d) { return d.dot(view) >= sameView; });
+}
 
 /// The point of \a points_mm nearest to \a there_mm within \a radius_mm (of equally near ones,
 /// the last), or null.
