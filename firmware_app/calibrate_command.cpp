@@ -5,8 +5,10 @@
 #include <cstdio>
 #include <vector>
 
+#include "core/calibration_session.hpp"
 #include "firmware_app/frame_source.hpp"
 #include "firmware_app/model_file.hpp"
+#include "firmware_app/model_merge.hpp"
 
 namespace edgetrack::app {
 
@@ -38,8 +40,9 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     std::vector<double> times_s;
     std::vector<std::size_t> frameEnd;
     std::vector<Vec3> points_rig_mm;
-    Result<FrameSourceSummary> read =
-        forEachMarkerFrame(options.input, options.from, [&](const MarkerFrame& frame) -> Status {
+    Result<FrameSourceSummary> read = forEachMarkerFrame(
+        options.input, options.from, options.settings.config.markers,
+        [&](const MarkerFrame& frame) -> Status {
             times_s.push_back(frame.time_s);
             points_rig_mm.insert(points_rig_mm.end(), frame.points_rig_mm.begin(),
                                  frame.points_rig_mm.end());
@@ -51,13 +54,15 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     if (!read)
         return read.error();
 
-    CalibrationSession session(options.config, options.completion,
+    const FirmwareConfig& config = options.settings.config;
+    const StereoRig* rig = read->rig ? &*read->rig : nullptr;
+    CalibrationSession session(config.calibration, completionFor(config, rig),
                                std::max<std::size_t>(times_s.size(), 1),
                                std::max<std::size_t>(points_rig_mm.size(), 1));
     if (!session.isValid())
         return Error{"calibration configuration: markers per object and per model must be 4 to " +
                      std::to_string(MarkerSet::kCapacity)};
-    std::vector<CalibrationObjectView> views(options.config.maxObjects);
+    std::vector<CalibrationObjectView> views(config.calibration.maxObjects);
     for (std::size_t f = 0; f < times_s.size(); ++f) {
         const std::size_t begin = f == 0 ? 0 : frameEnd[f - 1];
         session.update(times_s[f],
@@ -67,11 +72,13 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     }
     if (options.showProgress)
         progress << "\n";
-    const std::vector<MarkerModel> models = session.complete();
-    const std::size_t count = models.size();
-    for (std::size_t i = 0; i < count; ++i)
-        if (Status s = writeModelJson(modelPath(options.out, models[i].id), models[i],
-                                      "body " + std::to_string(models[i].id));
+    // As on the board when it has no models yet: the same fragments dropped, ids and S_min.
+    const MergedModels merged =
+        mergeLearntModels({}, session.complete(), config.maxModels, config.calibration.smin);
+    const std::size_t count = merged.models.size();
+    for (const NamedModel& named : merged.models)
+        if (Status s =
+                writeModelJson(modelPath(options.out, named.model.id), named.model, named.name);
             !s)
             return s;
 
@@ -79,14 +86,19 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     summary << "edgetrack calibrate: " << read->frames << " frames from " << read->level << ", "
             << read->points << " markers; " << count << (count == 1 ? " model" : " models")
             << " written to " << options.out.string() << "\n";
-    for (std::size_t i = 0; i < count; ++i) {
-        summary << "  body_" << models[i].id << ".json: " << models[i].markers_model_mm.size()
-                << " markers, " << models[i].edges.size() << " edges, s_min " << models[i].sMin;
-        if (models[i].sameShapeAs >= 0)
-            summary << " (same layout as body_" << models[i].sameShapeAs
+    summary << "  settings: " << options.settings.source << "\n";
+    for (const NamedModel& named : merged.models) {
+        const MarkerModel& model = named.model;
+        summary << "  body_" << model.id << ".json: " << model.markers_model_mm.size()
+                << " markers, " << model.edges.size() << " edges, s_min " << model.sMin;
+        if (model.sameShapeAs >= 0)
+            summary << " (same layout as body_" << model.sameShapeAs
                     << ": told apart only by tracking them continuously)";
         summary << "\n";
     }
+    if (merged.fragments + merged.refused > 0)
+        summary << "  dropped: " << merged.fragments << " fragments of a larger body, "
+                << merged.refused << " beyond max_models\n";
     summary << "  markers born " << c.markersBorn << ", reappeared " << c.markersReappeared
             << ", invalid " << c.invalidRemoved << "; objects split " << c.splits << ", collapsed "
             << c.collapsed << ", found again " << c.refound << "; refused: markers "

@@ -5,9 +5,8 @@
 #include <optional>
 #include <ostream>
 
-#include "core/calibration_session.hpp"
-#include "core/object_calibrator.hpp"
 #include "core/result.hpp"
+#include "firmware_app/frame_source.hpp"
 #include "firmware_app/recording/recording.hpp"
 
 namespace edgetrack::app {
@@ -16,9 +15,8 @@ struct CalibrateOptions {
     std::filesystem::path input;
     std::filesystem::path out;
     std::optional<recording::Level> from;
-    CalibrationConfig config{};
-    /// The completion stage that turns the online models into the final ones.
-    CompletionConfig completion{};
+    /// [blobs], [stereo], [calibration] and [completion] are used, as on the board.
+    CommandSettings settings{};
     /// Rewrite one progress line on \a progress (a terminal) while frames are read.
     bool showProgress = false;
 };
@@ -28,7 +26,9 @@ struct CalibrateOptions {
  * MODELDIR/body_<id>.json for each object found.
  *
  * The online stage (ObjectCalibrator) runs frame by frame as on the board; its models are then
- * completed over all the recording's frames (CalibrationCompletion), and those are written.
+ * completed over all the recording's frames (CalibrationCompletion) and merged as the board
+ * merges a field calibration into an empty model set (fragments of a body dropped), and those are
+ * written.
  *
  * MODELDIR must be new or empty. Prints a summary (models, markers, S_min, counters) to
  * \a summary, and progress (frames, objects, markers per object) to \a progress when asked.

@@ -43,6 +43,7 @@ struct SimOptions {
 };
 
 struct RecordingOptions {
+    std::string config;
     std::string input;
     std::string out;
     std::string models;
@@ -62,6 +63,23 @@ CLI::Validator levelValidator(std::vector<std::string> allowed) {
             return "level must be one of " + names;
         },
         names, "LEVEL");
+}
+
+void addConfigOption(CLI::App* command, RecordingOptions& options) {
+    command->add_option("--config", options.config,
+                        "Settings as on the board (edgetrack.toml; default: built-in defaults)");
+}
+
+/// Reads --config of an offline command into \a settings; on failure prints why.
+bool loadSettings(const RecordingOptions& options, const char* command, CommandSettings& settings,
+                  std::ostream& err) {
+    Result<CommandSettings> loaded = loadCommandSettings(options.config);
+    if (!loaded) {
+        err << "edgetrack " << command << ": " << loaded.error().message << "\n";
+        return false;
+    }
+    settings = std::move(*loaded);
+    return true;
 }
 
 } // namespace
@@ -104,6 +122,7 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     reconstructCommand->add_option("--out", reconstruct.out, "Recording to write")->required();
     reconstructCommand->add_option("--from", reconstruct.from, "Level to start from")
         ->check(levelValidator({"images", "blobs"}));
+    addConfigOption(reconstructCommand, reconstruct);
 
     RecordingOptions calibrate;
     CLI::App* calibrateCommand =
@@ -112,6 +131,7 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     calibrateCommand->add_option("--out", calibrate.out, "Model directory to write")->required();
     calibrateCommand->add_option("--from", calibrate.from, "Level to start from")
         ->check(levelValidator({"images", "blobs", "points"}));
+    addConfigOption(calibrateCommand, calibrate);
 
     RecordingOptions track;
     CLI::App* trackCommand = app.add_subcommand("track", "Find the models' poses in a recording");
@@ -120,6 +140,7 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     trackCommand->add_option("--out", track.out, "Pose CSV to write")->required();
     trackCommand->add_option("--from", track.from, "Level to start from")
         ->check(levelValidator({"images", "blobs", "points"}));
+    addConfigOption(trackCommand, track);
 
     CLI::App* modelCommand =
         app.add_subcommand("model", "List, show, export and import the models on flash");
@@ -206,6 +227,8 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.out = reconstruct.out;
         if (!reconstruct.from.empty())
             options.from = recording::parseLevel(reconstruct.from);
+        if (!loadSettings(reconstruct, "reconstruct", options.settings, err))
+            return kExitFailure;
         if (Status s = runReconstruct(options, out); !s) {
             err << "edgetrack reconstruct: " << s.error().message << "\n";
             return kExitFailure;
@@ -218,6 +241,8 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.out = calibrate.out;
         if (!calibrate.from.empty())
             options.from = recording::parseLevel(calibrate.from);
+        if (!loadSettings(calibrate, "calibrate", options.settings, err))
+            return kExitFailure;
         // Progress is for a person watching a terminal, not for logs or tests.
         options.showProgress = &err == &std::cerr && ::isatty(STDERR_FILENO) != 0;
         if (Status s = runCalibrate(options, out, err); !s) {
@@ -233,6 +258,8 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.out = track.out;
         if (!track.from.empty())
             options.from = recording::parseLevel(track.from);
+        if (!loadSettings(track, "track", options.settings, err))
+            return kExitFailure;
         options.showProgress = &err == &std::cerr && ::isatty(STDERR_FILENO) != 0;
         if (Status s = runTrack(options, out, err); !s) {
             err << "edgetrack track: " << s.error().message << "\n";

@@ -36,16 +36,6 @@ constexpr std::size_t kDatagramBytes = 8192;
 
 /// The completion stage as the board runs it: the calibration's own capacities and S_min, markers
 /// seen from between the two cameras.
-CompletionConfig completionFor(const FirmwareConfig& config, const StereoRig& rig) {
-    CompletionConfig c = config.completion;
-    c.maxModels = config.calibration.maxObjects;
-    c.maxMarkersPerModel = config.calibration.maxMarkersPerObject;
-    c.minModelMarkers = config.calibration.minModelMarkers;
-    c.smin = config.calibration.smin;
-    c.viewpoint_rig_mm = 0.5 * (rig.camera(0).centre_rig_mm() + rig.camera(1).centre_rig_mm());
-    return c;
-}
-
 /// Frames a session can last: its longest duration at the camera rate, and a margin for jitter.
 std::size_t sessionFrames(const FirmwareConfig& config) {
     return static_cast<std::size_t>(
@@ -85,21 +75,13 @@ void StageTime::add(double us) {
 Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig)
     : config_(config)
     , board_(board)
-    , width_px_(rig.camera(0).intrinsics().width_px)
-    , height_px_(rig.camera(0).intrinsics().height_px)
-    , blobs_{BoundedVector<Blob>(config.blobs.maxBlobs), BoundedVector<Blob>(config.blobs.maxBlobs)}
-    , stereo_(rig, config.stereo, config.blobs.maxBlobs)
-    , stereoMarkers_(config.stereo.maxMarkers)
-    , points_rig_mm_(config.stereo.maxMarkers)
-    , calibration_(config.calibration, completionFor(config, rig), sessionFrames(config),
+    , markers_(rig, config.markers)
+    , calibration_(config.calibration, completionFor(config, &rig), sessionFrames(config),
                    sessionFrames(config) * config.session.bufferPointsPerFrame)
     , store_(board.flash, MarkerSet::kCapacity)
     , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s)) {
-    if (rig.camera(1).intrinsics().width_px != width_px_ ||
-        rig.camera(1).intrinsics().height_px != height_px_)
-        error_ = "the rig's two cameras must have the same image size";
-    for (std::optional<BlobDetector>& detector : detectors_)
-        detector.emplace(config.blobs, width_px_, height_px_);
+    if (!markers_.isValid())
+        error_ = markers_.error();
     if (!calibration_.isValid())
         error_ = "[calibration] settings are unusable (markers per object must be 4 to " +
                  std::to_string(MarkerSet::kCapacity) + ", the session buffer not empty)";
@@ -244,7 +226,7 @@ void Firmware::startCalibration() {
 }
 
 void Firmware::calibrationStep(double time_s) {
-    if (!calibration_.update(time_s, points_rig_mm_.span())) {
+    if (!calibration_.update(time_s, markers_.points_rig_mm())) {
         ++counters_.sessionFramesRefused;
         finishCalibration("its full session buffer");
         return;
@@ -449,25 +431,25 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
                        std::int64_t acquiredHost_ns) {
     const std::int64_t t0 = hostNanos();
     for (std::size_t c = 0; c < 2; ++c)
-        if (frame.camera[c].width_px != width_px_ || frame.camera[c].height_px != height_px_ ||
-            frame.camera[c].stride_bytes < width_px_ || frame.camera[c].pixels == nullptr) {
+        if (frame.camera[c].width_px != markers_.width_px() ||
+            frame.camera[c].height_px != markers_.height_px() ||
+            frame.camera[c].stride_bytes < markers_.width_px() ||
+            frame.camera[c].pixels == nullptr) {
             ++counters_.framesWrongSize;
             return;
         }
-    for (std::size_t c = 0; c < 2; ++c)
-        detectors_[c]->detect(frame.camera[c].pixels, frame.camera[c].stride_bytes, blobs_[c]);
+    for (int c = 0; c < 2; ++c)
+        markers_.detectBlobs(c, frame.camera[static_cast<std::size_t>(c)].pixels,
+                             frame.camera[static_cast<std::size_t>(c)].stride_bytes);
     const std::int64_t t1 = hostNanos();
-    stereo_.match(blobs_[0].span(), blobs_[1].span(), stereoMarkers_);
-    points_rig_mm_.clear();
-    for (const StereoMarker& m : stereoMarkers_)
-        points_rig_mm_.push_back(m.position_rig_mm);
+    markers_.matchStereo();
     const std::int64_t t2 = hostNanos();
 
     const double time_s = hal::toSeconds(frame.midExposure());
     if (state_ == FirmwareState::Calibrating) {
         calibrationStep(time_s);
     } else {
-        tracker_->update(time_s, points_rig_mm_.span());
+        tracker_->update(time_s, markers_.points_rig_mm());
         const std::span<const TrackedBody> tracked = tracker_->bodies();
         for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
             if (tracked[b].found())
@@ -488,11 +470,10 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     if (t4 - t0 > budget)
         ++counters_.framesOverBudget;
 
-    counters_.blobOverflow =
-        detectors_[0]->counters().blobOverflow + detectors_[1]->counters().blobOverflow;
-    counters_.labelOverflow =
-        detectors_[0]->counters().labelOverflow + detectors_[1]->counters().labelOverflow;
-    counters_.markerOverflow = stereo_.counters().markerOverflow;
+    const MarkerPipelineCounters refused = markers_.counters();
+    counters_.blobOverflow = refused.blobOverflow;
+    counters_.labelOverflow = refused.labelOverflow;
+    counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
     lastFrame_ = frame.number;
     frameTime_s_ = time_s;

@@ -8,13 +8,12 @@
 #include <string>
 #include <vector>
 
-#include "core/blob_detector.hpp"
 #include "core/bounded_vector.hpp"
 #include "core/calibration_session.hpp"
+#include "core/marker_pipeline.hpp"
 #include "core/model_tracker.hpp"
 #include "core/pose_filter.hpp"
 #include "core/ring_buffer.hpp"
-#include "core/stereo_matcher.hpp"
 #include "firmware_app/button_input.hpp"
 #include "firmware_app/calibration_finisher.hpp"
 #include "firmware_app/firmware_config.hpp"
@@ -149,6 +148,10 @@ public:
     }
     /// \return frame number of the last processed frame.
     std::uint64_t lastFrame() const { return lastFrame_; }
+    /// \return mid-exposure of the last processed frame (s, the board's clock).
+    double lastFrameTime_s() const { return frameTime_s_; }
+    /// \return the marker front end: the last processed frame's blobs and 3D markers.
+    const MarkerPipeline& markerPipeline() const { return markers_; }
     /// \return latency of the last processed frame, mid-exposure to send (s).
     double lastLatency_s() const { return lastLatency_s_; }
     /// \return what start-up found on flash, and the last event worth telling (one line each).
@@ -202,13 +205,7 @@ private:
     std::string error_;
 
     // Frame pipeline, sized by the constructor.
-    int width_px_ = 0;
-    int height_px_ = 0;
-    std::array<std::optional<BlobDetector>, 2> detectors_;
-    std::array<BoundedVector<Blob>, 2> blobs_;
-    StereoMatcher stereo_;
-    BoundedVector<StereoMarker> stereoMarkers_;
-    BoundedVector<Vec3> points_rig_mm_;
+    MarkerPipeline markers_;
     std::optional<ModelTracker> tracker_;
     std::vector<PoseFilter> filters_;
     /// Per body: the pose sent (filtered when the filter is on), model to rig (mm).

@@ -334,6 +334,18 @@ void readHealth(Section& s, HealthSettings& h) {
 
 } // namespace
 
+CompletionConfig completionFor(const FirmwareConfig& config, const StereoRig* rig) {
+    CompletionConfig c = config.completion;
+    c.maxModels = config.calibration.maxObjects;
+    c.maxMarkersPerModel = config.calibration.maxMarkersPerObject;
+    c.minModelMarkers = config.calibration.minModelMarkers;
+    c.smin = config.calibration.smin;
+    if (rig != nullptr)
+        c.viewpoint_rig_mm =
+            0.5 * (rig->camera(0).centre_rig_mm() + rig->camera(1).centre_rig_mm());
+    return c;
+}
+
 Result<hal::UdpEndpoint> parseEndpoint(std::string_view text) {
     const std::size_t colon = text.rfind(':');
     if (colon == std::string_view::npos)
@@ -394,8 +406,8 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
 
     read(root, "cameras", "cameras", [&](Section& s) { readCameras(s, config.cameras); });
     read(root, "gpio", "gpio", [&](Section& s) { readGpio(s, config.gpio); });
-    read(root, "blobs", "blobs", [&](Section& s) { readBlobs(s, config.blobs); });
-    read(root, "stereo", "stereo", [&](Section& s) { readStereo(s, config.stereo); });
+    read(root, "blobs", "blobs", [&](Section& s) { readBlobs(s, config.markers.blobs); });
+    read(root, "stereo", "stereo", [&](Section& s) { readStereo(s, config.markers.stereo); });
     read(root, "markers", "markers",
          [&](Section& s) { readMarkers(s, config.calibration.tracking); });
     read(root, "calibration", "calibration", [&](Section& s) {

@@ -8,13 +8,13 @@
 #include <string_view>
 #include <vector>
 
-#include "core/blob_detector.hpp"
 #include "core/calibration_completion.hpp"
+#include "core/marker_pipeline.hpp"
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/pose_filter.hpp"
 #include "core/result.hpp"
-#include "core/stereo_matcher.hpp"
+#include "core/stereo_rig.hpp"
 #include "firmware_app/output/can_pose.hpp"
 #include "hal/udp.hpp"
 
@@ -132,8 +132,8 @@ struct HealthSettings {
 struct FirmwareConfig {
     CameraSettings cameras{};
     GpioSettings gpio{};
-    BlobDetectorConfig blobs{};
-    StereoConfig stereo{};
+    /// [blobs] and [stereo]: the marker front end.
+    MarkerPipelineConfig markers{};
     CalibrationConfig calibration{};
     CalibrationSessionSettings session{};
     /// The completion stage at the end of a session; its capacities and S_min follow
@@ -163,6 +163,11 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
 /// \brief Read and parse \a path.
 Result<FirmwareConfig> loadFirmwareConfig(const std::filesystem::path& path);
 
+/**
+ * \brief The completion stage's settings for a session on \a rig: [completion], with the
+ * capacities and S_min of [calibration], seen from between the cameras (none: the rig origin).
+ */
+CompletionConfig completionFor(const FirmwareConfig& config, const StereoRig* rig);
 /// \brief Parse "HOST:PORT" with a dotted IPv4 host (multicast groups included).
 Result<hal::UdpEndpoint> parseEndpoint(std::string_view text);
 

@@ -5,7 +5,7 @@
 #include <set>
 #include <vector>
 
-#include "core/stereo_matcher.hpp"
+#include "core/marker_pipeline.hpp"
 #include "firmware_app/recording/c3d.hpp"
 
 namespace edgetrack::app {
@@ -29,6 +29,18 @@ Status prepareOutputDirectory(const fs::path& out) {
     if (ec)
         return Error{out.string() + ": cannot create: " + ec.message()};
     return Ok{};
+}
+
+Result<CommandSettings> loadCommandSettings(const fs::path& path) {
+    CommandSettings settings;
+    if (path.empty())
+        return settings;
+    Result<FirmwareConfig> config = loadFirmwareConfig(path);
+    if (!config)
+        return config.error();
+    settings.config = std::move(*config);
+    settings.source = path.string();
+    return settings;
 }
 
 namespace {
@@ -91,6 +103,12 @@ Result<FrameSourceSummary> readPointFrames(const fs::path& input,
                          std::to_string(entry.first) + " is not in frames.csv"};
     FrameSourceSummary summary;
     summary.level = "points";
+    if (inventory.rig) {
+        Result<StereoRig> rig = recording::readRig(input / "rig.toml");
+        if (!rig)
+            return rig.error();
+        summary.rig = std::move(*rig);
+    }
     const std::vector<Vec3> none;
     for (const recording::FrameRow& row : frames) {
         auto it = byFrame.find(row.frame);
@@ -107,7 +125,7 @@ Result<FrameSourceSummary> readPointFrames(const fs::path& input,
 }
 
 Result<FrameSourceSummary>
-reconstructFrames(const fs::path& input, Level level,
+reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig& config,
                   const std::function<Status(const MarkerFrame&)>& visit) {
     Result<StereoRig> rig = recording::readRig(input / "rig.toml");
     if (!rig)
@@ -132,20 +150,13 @@ reconstructFrames(const fs::path& input, Level level,
         }
     }
 
-    const BlobDetectorConfig blobConfig;
-    const CameraIntrinsics& in0 = rig->camera(0).intrinsics();
-    const CameraIntrinsics& in1 = rig->camera(1).intrinsics();
-    BlobDetector detector0(blobConfig, in0.width_px, in0.height_px);
-    BlobDetector detector1(blobConfig, in1.width_px, in1.height_px);
-    const StereoConfig stereoConfig;
-    StereoMatcher stereo(*rig, stereoConfig, blobConfig.maxBlobs);
-    BoundedVector<Blob> blobs[2] = {BoundedVector<Blob>(blobConfig.maxBlobs),
-                                    BoundedVector<Blob>(blobConfig.maxBlobs)};
-    BoundedVector<StereoMarker> markers(stereoConfig.maxMarkers);
-    std::vector<Vec3> points;
+    MarkerPipeline pipeline(*rig, config);
+    if (!pipeline.isValid())
+        return Error{(input / "rig.toml").string() + ": " + pipeline.error()};
 
     FrameSourceSummary summary;
     summary.level = recording::levelName(level);
+    summary.rig = *rig;
     for (const recording::FrameRow& row : *frames) {
         if (level == Level::Images) {
             for (int c = 0; c < 2; ++c) {
@@ -154,41 +165,35 @@ reconstructFrames(const fs::path& input, Level level,
                     recording::imagePath(input, row.frame, c), in.width_px, in.height_px);
                 if (!image)
                     return image.error();
-                (c == 0 ? detector0 : detector1)
-                    .detect(image->pixels.data(), image->width, blobs[c]);
+                pipeline.detectBlobs(c, image->pixels.data(), image->width);
             }
         } else {
-            blobs[0].clear();
-            blobs[1].clear();
+            pipeline.blobs(0).clear();
+            pipeline.blobs(1).clear();
             for (const recording::BlobRow& b : inputBlobs[row.frame]) {
                 Blob blob;
                 blob.centre_px = {b.u_px, b.v_px};
                 blob.area_px = static_cast<float>(b.area_px.value_or(0.0));
-                blobs[b.camera].push_back(blob);
+                pipeline.blobs(b.camera).push_back(blob);
             }
         }
-        stereo.match(blobs[0].span(), blobs[1].span(), markers);
-        points.clear();
-        for (const StereoMarker& m : markers)
-            points.push_back(m.position_rig_mm);
+        pipeline.matchStereo();
         MarkerFrame frame;
         frame.frame = row.frame;
         frame.time_s = row.time_s;
-        frame.blobs[0] = blobs[0].span();
-        frame.blobs[1] = blobs[1].span();
-        frame.points_rig_mm = points;
-        summary.blobs += blobs[0].size() + blobs[1].size();
-        summary.points += points.size();
+        frame.blobs[0] = pipeline.blobs(0).span();
+        frame.blobs[1] = pipeline.blobs(1).span();
+        frame.points_rig_mm = pipeline.points_rig_mm();
+        summary.blobs += pipeline.blobs(0).size() + pipeline.blobs(1).size();
+        summary.points += frame.points_rig_mm.size();
         ++summary.frames;
         if (Status s = visit(frame); !s)
             return s.error();
     }
-    // The blob vectors count every refused blob, from the detector and from blobs.csv alike (the
-    // detector's own counter sees the same refusals, so adding it would count them twice).
-    summary.blobOverflow = blobs[0].overflowCount() + blobs[1].overflowCount();
-    summary.rejectedNotRound =
-        detector0.counters().rejectedNotRound + detector1.counters().rejectedNotRound;
-    summary.markerOverflow = stereo.counters().markerOverflow;
+    const MarkerPipelineCounters refused = pipeline.counters();
+    summary.blobOverflow = refused.blobOverflow;
+    summary.rejectedNotRound = refused.rejectedNotRound;
+    summary.markerOverflow = refused.markerOverflow;
     return summary;
 }
 
@@ -196,6 +201,7 @@ reconstructFrames(const fs::path& input, Level level,
 
 Result<FrameSourceSummary>
 forEachMarkerFrame(const fs::path& input, std::optional<Level> from,
+                   const MarkerPipelineConfig& config,
                    const std::function<Status(const MarkerFrame&)>& visit) {
     if (isC3dFile(input)) {
         if (from && *from != Level::Points)
@@ -210,7 +216,7 @@ forEachMarkerFrame(const fs::path& input, std::optional<Level> from,
         return level.error();
     if (*level == Level::Points)
         return readPointFrames(input, *inventory, visit);
-    return reconstructFrames(input, *level, visit);
+    return reconstructFrames(input, *level, config, visit);
 }
 
 } // namespace edgetrack::app

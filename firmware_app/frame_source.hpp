@@ -7,10 +7,13 @@
 #include <functional>
 #include <optional>
 #include <span>
+#include <string>
 
-#include "core/blob_detector.hpp"
 #include "core/geometry.hpp"
+#include "core/marker_pipeline.hpp"
 #include "core/result.hpp"
+#include "core/stereo_rig.hpp"
+#include "firmware_app/firmware_config.hpp"
 #include "firmware_app/recording/recording.hpp"
 
 namespace edgetrack::app {
@@ -35,17 +38,34 @@ struct FrameSourceSummary {
     std::uint64_t rejectedNotRound = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t markerOverflow = 0;
+    /// The recording's rig.toml, when it has one (a .c3d file has none).
+    std::optional<StereoRig> rig;
 };
+
+/**
+ * \brief The settings an offline command runs with: those of an edgetrack.toml, so that a
+ * recording is processed as the board with that file would process it.
+ */
+struct CommandSettings {
+    FirmwareConfig config{};
+    /// Where they came from, for the command's summary.
+    std::string source = "built-in defaults (as deploy/edgetrack.toml)";
+};
+
+/// \brief The settings of \a path (INTERFACES' `--config FILE`); none: the built-in defaults.
+Result<CommandSettings> loadCommandSettings(const std::filesystem::path& path);
 
 /**
  * \brief Call \a visit for every frame of \a input, in order.
  *
  * \a input is a recording directory (INTERFACES §1; the level is \a from or the lowest present)
- * or a .c3d file (points level: its valid samples, labels ignored). Stops at the first error,
- * from reading or from \a visit.
+ * or a .c3d file (points level: its valid samples, labels ignored). Images and blobs go through
+ * a MarkerPipeline built from \a config, as on the board. Stops at the first error, from reading
+ * or from \a visit.
  */
 Result<FrameSourceSummary>
 forEachMarkerFrame(const std::filesystem::path& input, std::optional<recording::Level> from,
+                   const MarkerPipelineConfig& config,
                    const std::function<Status(const MarkerFrame&)>& visit);
 
 /// \return whether \a input names a C3D file (by its extension).

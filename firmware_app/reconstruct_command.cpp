@@ -56,8 +56,9 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
 
     std::vector<recording::BlobRow> blobRows;
     std::vector<recording::PointRow> pointRows;
-    Result<FrameSourceSummary> read =
-        forEachMarkerFrame(options.input, *level, [&](const MarkerFrame& frame) -> Status {
+    Result<FrameSourceSummary> read = forEachMarkerFrame(
+        options.input, *level, options.settings.config.markers,
+        [&](const MarkerFrame& frame) -> Status {
             for (int c = 0; c < 2; ++c)
                 for (const Blob& b : frame.blobs[c])
                     blobRows.push_back({frame.frame, c, b.centre_px.x(), b.centre_px.y(),
@@ -83,7 +84,8 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     summary << "edgetrack reconstruct: " << read->frames << " frames from " << read->level << ", "
             << blobRows.size() << " blobs, " << pointRows.size() << " markers; rejected blobs "
             << read->rejectedNotRound << " not round; blob overflow " << read->blobOverflow
-            << ", marker overflow " << read->markerOverflow << "\n";
+            << ", marker overflow " << read->markerOverflow << "\n"
+            << "  settings: " << options.settings.source << "\n";
     return Ok{};
 }
 

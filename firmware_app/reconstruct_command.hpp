@@ -6,7 +6,7 @@
 #include <ostream>
 
 #include "core/result.hpp"
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/frame_source.hpp"
 
 namespace edgetrack::app {
 
@@ -15,6 +15,8 @@ struct ReconstructOptions {
     std::filesystem::path out;
     /// images or blobs; nothing: the lowest level present.
     std::optional<recording::Level> from;
+    /// [blobs] and [stereo] are used, as on the board.
+    CommandSettings settings{};
 };
 
 /**

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/model_tracker.hpp"
 #include "firmware_app/frame_source.hpp"
 #include "firmware_app/model_file.hpp"
 #include "firmware_app/pose_file.hpp"
@@ -41,15 +42,16 @@ Status runTrack(const TrackOptions& options, std::ostream& summary, std::ostream
     std::vector<MarkerModel> models;
     for (NamedModel& named : *read)
         models.push_back(std::move(named.model));
-    ModelTracker tracker(models, options.config);
+    ModelTracker tracker(models, options.settings.config.tracking);
     if (!tracker.isValid())
         return Error{"tracking configuration is unusable"};
 
     std::string csv = kPoseCsvHeader;
     std::vector<BodyTally> tally(models.size());
     std::size_t frames = 0;
-    Result<FrameSourceSummary> source =
-        forEachMarkerFrame(options.input, options.from, [&](const MarkerFrame& frame) -> Status {
+    Result<FrameSourceSummary> source = forEachMarkerFrame(
+        options.input, options.from, options.settings.config.markers,
+        [&](const MarkerFrame& frame) -> Status {
             tracker.update(frame.time_s, frame.points_rig_mm);
             std::size_t found = 0;
             for (std::size_t b = 0; b < models.size(); ++b) {
@@ -88,6 +90,7 @@ Status runTrack(const TrackOptions& options, std::ostream& summary, std::ostream
     summary << "edgetrack track: " << source->frames << " frames from " << source->level << ", "
             << models.size() << (models.size() == 1 ? " model" : " models") << "; poses written to "
             << options.out.string() << "\n";
+    summary << "  settings: " << options.settings.source << "\n";
     for (std::size_t b = 0; b < models.size(); ++b) {
         BodyTally& t = tally[b];
         const std::size_t found = t.predicted + t.searched;

@@ -5,9 +5,8 @@
 #include <optional>
 #include <ostream>
 
-#include "core/model_tracker.hpp"
 #include "core/result.hpp"
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/frame_source.hpp"
 
 namespace edgetrack::app {
 
@@ -16,7 +15,8 @@ struct TrackOptions {
     std::filesystem::path input;
     std::filesystem::path out;
     std::optional<recording::Level> from;
-    ModelTrackingConfig config{};
+    /// [blobs], [stereo] and [tracking] are used, as on the board.
+    CommandSettings settings{};
     /// Rewrite one progress line on \a progress (a terminal) while frames are read.
     bool showProgress = false;
 };

@@ -60,7 +60,8 @@ int main(int argc, char** argv) {
     app.add_option("--require-found", requireFound, "minimum share of markers found");
     app.add_option("--require-false", requireFalse, "maximum false markers per true marker");
     app.add_option("--require-switches", requireSwitches, "maximum ID switches per marker-frame");
-    StereoConfig stereoConfig;
+    MarkerPipelineConfig pipelineConfig;
+    StereoConfig& stereoConfig = pipelineConfig.stereo;
     app.add_option("--sigma-epipolar", stereoConfig.sigmaEpipolar_px, "sigma_ep of eq. 1 (px)");
     app.add_option("--sigma-similarity", stereoConfig.sigmaSimilarity_px,
                    "sigma_sim of eq. 4 (px)");
@@ -76,7 +77,8 @@ int main(int argc, char** argv) {
         return 2;
     }
     const sim::World world(std::move(*scene), seed);
-    test::SimImagePipeline pipeline(world, seed, stereoConfig);
+    test::SimImagePipeline images(world, seed, pipelineConfig);
+    const MarkerPipeline& pipeline = images.pipeline();
     MarkerTracker tracker(trackConfig);
     std::vector<Vec3> points;
     sim::Observation observation;
@@ -89,7 +91,8 @@ int main(int argc, char** argv) {
     for (std::int64_t f = 0; f < frames; ++f) {
         const auto frame = static_cast<std::uint64_t>(f);
         world.observe(frame, observation);
-        pipeline.run(observation, frame, matcher == "epipolar", points);
+        images.run(observation, frame,
+                   matcher == "epipolar" ? StereoMethod::EpipolarOnly : StereoMethod::Svd, points);
         const std::span<const TrackedMarker> tracked = tracker.update(observation.time_s, points);
 
         sim::separatelyVisible(observation, visible);

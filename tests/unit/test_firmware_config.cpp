@@ -81,7 +81,7 @@ fd = true
 )",
                                                          "c.toml");
     ASSERT_TRUE(c) << c.error().message;
-    EXPECT_EQ(c->blobs.threshold, 90);
+    EXPECT_EQ(c->markers.blobs.threshold, 90);
     EXPECT_FALSE(c->gpio.buttonActiveLow);
     EXPECT_DOUBLE_EQ(c->tracking.distanceTolerance_mm, 0.5);
     EXPECT_EQ(c->maxModels, 4u);

@@ -1,0 +1,61 @@
+// The marker front end: both cameras' blob detection and stereo correspondence, images to 3D
+// points.
+#include "core/marker_pipeline.hpp"
+
+namespace edgetrack {
+
+MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig& config)
+    : config_(config)
+    , width_px_(rig.camera(0).intrinsics().width_px)
+    , height_px_(rig.camera(0).intrinsics().height_px)
+    , detectors_{BlobDetector(config.blobs, width_px_, height_px_),
+                 BlobDetector(config.blobs, width_px_, height_px_)}
+    , blobs_{BoundedVector<Blob>(config.blobs.maxBlobs), BoundedVector<Blob>(config.blobs.maxBlobs)}
+    , stereo_(rig, config.stereo, config.blobs.maxBlobs)
+    , markers_(config.stereo.maxMarkers)
+    , points_rig_mm_(config.stereo.maxMarkers) {
+    if (rig.camera(1).intrinsics().width_px != width_px_ ||
+        rig.camera(1).intrinsics().height_px != height_px_)
+        error_ = "the rig's two cameras must have the same image size";
+    else if (!detectors_[0].isValid())
+        error_ = "[blobs] settings are unusable for the rig's image size";
+    else if (!stereo_.isValid())
+        error_ = "[stereo] settings are unusable for the rig";
+}
+
+void MarkerPipeline::detectBlobs(int camera, const std::uint8_t* pixels, int stride_bytes) {
+    detectors_[index(camera)].detect(pixels, stride_bytes, blobs_[index(camera)]);
+}
+
+void MarkerPipeline::matchStereo(StereoMethod method) {
+    if (method == StereoMethod::EpipolarOnly)
+        stereo_.matchEpipolarOnly(blobs_[0].span(), blobs_[1].span(), markers_);
+    else
+        stereo_.match(blobs_[0].span(), blobs_[1].span(), markers_);
+    points_rig_mm_.clear();
+    for (const StereoMarker& marker : markers_)
+        points_rig_mm_.push_back(marker.position_rig_mm);
+}
+
+std::span<const Vec3> MarkerPipeline::process(const std::uint8_t* pixels0, int stride0_bytes,
+                                              const std::uint8_t* pixels1, int stride1_bytes) {
+    detectBlobs(0, pixels0, stride0_bytes);
+    detectBlobs(1, pixels1, stride1_bytes);
+    matchStereo();
+    return points_rig_mm();
+}
+
+MarkerPipelineCounters MarkerPipeline::counters() const {
+    MarkerPipelineCounters c;
+    for (std::size_t camera = 0; camera < 2; ++camera) {
+        c.rejectedNotRound += detectors_[camera].counters().rejectedNotRound;
+        c.labelOverflow += detectors_[camera].counters().labelOverflow;
+        // The blob vectors count every refused blob, from the detector and from outside alike
+        // (the detector's own counter sees the same refusals, so adding it would count twice).
+        c.blobOverflow += blobs_[camera].overflowCount();
+    }
+    c.markerOverflow = stereo_.counters().markerOverflow;
+    return c;
+}
+
+} // namespace edgetrack

@@ -1,0 +1,99 @@
+// The marker front end: both cameras' blob detection and stereo correspondence, images to 3D
+// points.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "core/blob_detector.hpp"
+#include "core/bounded_vector.hpp"
+#include "core/geometry.hpp"
+#include "core/stereo_matcher.hpp"
+
+namespace edgetrack {
+
+/// \brief Settings of the front end: `[blobs]` and `[stereo]` of edgetrack.toml.
+struct MarkerPipelineConfig {
+    BlobDetectorConfig blobs{};
+    StereoConfig stereo{};
+
+    bool operator==(const MarkerPipelineConfig&) const = default;
+};
+
+/// \brief What the front end refused for want of room or shape, summed over both cameras.
+struct MarkerPipelineCounters {
+    std::uint64_t rejectedNotRound = 0;
+    std::uint64_t blobOverflow = 0;
+    std::uint64_t labelOverflow = 0;
+    std::uint64_t markerOverflow = 0;
+};
+
+/// \brief How stereo pairs blobs: the paper's matcher, or the epipolar-only baseline of its
+/// Figure 6 (for evaluations).
+enum class StereoMethod : std::uint8_t { Svd, EpipolarOnly };
+
+/**
+ * \brief Turns one exposure of the rig's two cameras into 3D markers (rig frame, mm).
+ *
+ * This is the one composition of blob detection and stereo that every user runs: the firmware's
+ * frame loop, the offline commands (`reconstruct`, `calibrate`, `track`) and the quality runs.
+ * A frame is either both images (detectBlobs()) or blobs given from outside (blobs level: fill
+ * blobs() yourself), then matchStereo(). All storage is sized by the constructor from the
+ * configuration; a frame allocates nothing.
+ */
+class MarkerPipeline {
+public:
+    /// \param rig the stereo calibration; both cameras must have the same image size.
+    MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig& config);
+    MarkerPipeline(const MarkerPipeline&) = delete;
+    MarkerPipeline& operator=(const MarkerPipeline&) = delete;
+
+    /// \return false when the configuration or the rig cannot run (see error()).
+    bool isValid() const { return error_ == nullptr; }
+    const char* error() const { return error_ == nullptr ? "" : error_; }
+
+    /**
+     * \brief Detect the blobs of one camera's image into blobs(\a camera).
+     * \param pixels 8-bit image of the rig's size; rows \a stride_bytes apart (>= width).
+     */
+    void detectBlobs(int camera, const std::uint8_t* pixels, int stride_bytes);
+
+    /// \brief Pair blobs(0) with blobs(1) and triangulate: markers() and points_rig_mm().
+    void matchStereo(StereoMethod method = StereoMethod::Svd);
+
+    /// \brief Both images in, 3D markers (rig frame, mm) out.
+    std::span<const Vec3> process(const std::uint8_t* pixels0, int stride0_bytes,
+                                  const std::uint8_t* pixels1, int stride1_bytes);
+
+    /// \return camera \a camera's blobs (raw pixels) of this frame; writable for blobs level.
+    BoundedVector<Blob>& blobs(int camera) { return blobs_[index(camera)]; }
+    const BoundedVector<Blob>& blobs(int camera) const { return blobs_[index(camera)]; }
+    std::span<const StereoMarker> markers() const { return markers_.span(); }
+    /// \return this frame's 3D markers (rig frame, mm), in the order of markers().
+    std::span<const Vec3> points_rig_mm() const { return points_rig_mm_.span(); }
+
+    int width_px() const { return width_px_; }
+    int height_px() const { return height_px_; }
+    const MarkerPipelineConfig& config() const { return config_; }
+    const BlobDetector& detector(int camera) const { return detectors_[index(camera)]; }
+    const StereoMatcher& stereo() const { return stereo_; }
+    /// \brief Refusals since construction. Blobs given from outside that did not fit count too.
+    MarkerPipelineCounters counters() const;
+
+private:
+    static std::size_t index(int camera) { return camera == 0 ? 0 : 1; }
+
+    MarkerPipelineConfig config_;
+    int width_px_;
+    int height_px_;
+    std::array<BlobDetector, 2> detectors_;
+    std::array<BoundedVector<Blob>, 2> blobs_;
+    StereoMatcher stereo_;
+    BoundedVector<StereoMarker> markers_;
+    BoundedVector<Vec3> points_rig_mm_;
+    const char* error_ = nullptr;
+};
+
+} // namespace edgetrack
