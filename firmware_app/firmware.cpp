@@ -8,7 +8,6 @@
 
 #include "core/marker_set.hpp"
 #include "firmware_app/model_merge.hpp"
-#include "firmware_app/output/can_pose.hpp"
 
 namespace edgetrack::app {
 
@@ -23,24 +22,6 @@ std::int64_t hostNanos() {
 
 hal::Nanoseconds fromSeconds(double s) {
     return static_cast<hal::Nanoseconds>(std::llround(s * 1e9));
-}
-
-/// Strobe pulses are scheduled this many exposures ahead of the last delivered one: a frame whose
-/// processing stalls the loop for up to this many periods still leaves every exposure lit.
-constexpr int kStrobeAhead = 4;
-/// The ring stays lit continuously for the first frames, until pulses cover the exposures.
-constexpr std::uint64_t kContinuousFrames = 2;
-/// Markers in one calibration preview (`3d` line); the datagram buffer holds them.
-constexpr std::size_t kMaxPreviewMarkers = 128;
-constexpr std::size_t kDatagramBytes = 8192;
-
-/// The completion stage as the board runs it: the calibration's own capacities and S_min, markers
-/// seen from between the two cameras.
-/// Frames a session can last: its longest duration at the camera rate, and a margin for jitter.
-std::size_t sessionFrames(const FirmwareConfig& config) {
-    return static_cast<std::size_t>(
-               std::ceil(config.session.maxDuration_s * config.cameras.frameRate_hz * 1.05)) +
-           16;
 }
 
 } // namespace
@@ -75,11 +56,14 @@ void StageTime::add(double us) {
 Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig)
     : config_(config)
     , board_(board)
+    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s))
+    , queue_(config.cameras.queueDepth)
+    , strobe_(fromSeconds(config.gpio.strobeLead_us * 1e-6),
+              fromSeconds(config.gpio.strobeTail_us * 1e-6))
     , markers_(rig, config.markers)
-    , calibration_(config.calibration, completionFor(config, &rig), sessionFrames(config),
-                   sessionFrames(config) * config.session.bufferPointsPerFrame)
     , store_(board.flash, MarkerSet::kCapacity)
-    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s)) {
+    , calibration_(config, rig)
+    , outputs_(config) {
     if (!markers_.isValid())
         error_ = markers_.error();
     if (!calibration_.isValid())
@@ -90,15 +74,7 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
     tracker_.emplace(std::span<const MarkerModel>{}, config.tracking);
     if (!tracker_->isValid())
         error_ = "[tracking] settings are unusable";
-
-    objectViews_.resize(config.calibration.maxObjects);
     models_.reserve(config.maxModels);
-    filters_.assign(config.maxModels, PoseFilter(config.filter));
-    outputPoses_.resize(config.maxModels);
-    queue_ = RingBuffer<Queued>(config.cameras.queueDepth);
-    dtrackBodies_.reserve(config.maxModels);
-    dtrackMarkers_.reserve(kMaxPreviewMarkers);
-    datagram_.resize(kDatagramBytes);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -121,19 +97,18 @@ void Firmware::start() {
         setModels({});
         flashReport_ = loaded.error().message;
     }
-    state_ = FirmwareState::Tracking;
+    changeState(FirmwareState::Tracking);
     if (Status s = board_.cameras.start(); !s) {
         enterDegraded(("cameras did not start: " + s.error().message).c_str());
         return;
     }
-    cameraStarted_ = true;
-    strobing_ = false;
-    board_.ledRing.setContinuous(true);
-    lastFrameAt_ = board_.clock.now();
+    cameras_.started = true;
+    strobe_.restart(board_.ledRing);
+    cameras_.lastFrameAt = board_.clock.now();
 }
 
 Firmware::~Firmware() {
-    (void)finisher_.wait();
+    (void)calibration_.wait();
 }
 
 void Firmware::stop() {
@@ -142,7 +117,7 @@ void Firmware::stop() {
     board_.cameras.stop();
     board_.ledRing.setContinuous(false);
     board_.statusLed.set(false);
-    cameraStarted_ = false;
+    cameras_.started = false;
 }
 
 void Firmware::setModels(std::vector<NamedModel> models) {
@@ -152,8 +127,7 @@ void Firmware::setModels(std::vector<NamedModel> models) {
     for (const NamedModel& m : models_)
         layouts.push_back(copyOf(m.model));
     tracker_.emplace(layouts, config_.tracking);
-    for (PoseFilter& f : filters_)
-        f.reset();
+    outputs_.resetFilters();
 }
 
 Status Firmware::replaceModels(std::vector<NamedModel> models) {
@@ -175,7 +149,7 @@ std::span<const TrackedBody> Firmware::bodies() const {
 }
 
 std::size_t Firmware::calibrationObjects() const {
-    return state_ == FirmwareState::Calibrating ? calibration_.online().objectCount() : 0;
+    return calibration_.objectCount();
 }
 
 void Firmware::note(std::string event) {
@@ -183,7 +157,22 @@ void Firmware::note(std::string event) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Button and calibration sessions
+// The state machine
+
+void Firmware::changeState(FirmwareState next) {
+    if (state_ == FirmwareState::Calibrating && next != FirmwareState::Finishing &&
+        calibration_.isOpen()) {
+        calibration_.close();
+        ++counters_.calibrationsAbandoned;
+    }
+    // Whatever was tracked before a calibration, or before the cameras went down, has moved.
+    const bool trackingResumes =
+        next == FirmwareState::Tracking || next == FirmwareState::Finishing;
+    if (trackingResumes &&
+        (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded))
+        tracker_->reset();
+    state_ = next;
+}
 
 void Firmware::handleButton(hal::Nanoseconds now) {
     hal::ButtonEdge edge;
@@ -191,7 +180,7 @@ void Firmware::handleButton(hal::Nanoseconds now) {
         button_.edge(edge);
     for (ButtonEvent event = button_.poll(now); event != ButtonEvent::None;
          event = button_.poll(now)) {
-        if (finisher_.busy()) {
+        if (calibration_.finishing()) {
             // The worker owns the session and the flash until it is done.
             if (event == ButtonEvent::LongPress) {
                 deletePending_ = true;
@@ -215,73 +204,35 @@ void Firmware::handleButton(hal::Nanoseconds now) {
 }
 
 void Firmware::startCalibration() {
-    calibration_.reset();
-    calibrationStart_s_ = hal::toSeconds(board_.clock.now());
-    calibrationChanged_s_ = calibrationStart_s_;
-    learntSoFar_ = {};
-    lastPreview_s_ = -1e9;
-    state_ = FirmwareState::Calibrating;
+    calibration_.open(hal::toSeconds(board_.clock.now()));
+    changeState(FirmwareState::Calibrating);
     ++counters_.calibrationsStarted;
     note("calibration started");
 }
 
-void Firmware::calibrationStep(double time_s) {
-    if (!calibration_.update(time_s, markers_.points_rig_mm())) {
-        ++counters_.sessionFramesRefused;
-        finishCalibration("its full session buffer");
-        return;
-    }
-    // The session settles when the objects that would be exported, and their markers, stop
-    // changing.
-    const LearntSoFar learnt = learntSoFar();
-    if (learnt != learntSoFar_) {
-        learntSoFar_ = learnt;
-        calibrationChanged_s_ = time_s;
-    }
-    const double elapsed = time_s - calibrationStart_s_;
-    if (elapsed >= config_.session.maxDuration_s)
-        finishCalibration("its time limit");
-    else if (learnt.objects > 0 && elapsed >= config_.session.minDuration_s &&
-             time_s - calibrationChanged_s_ >= config_.session.settle_s)
-        finishCalibration("the models settled");
-}
-
-Firmware::LearntSoFar Firmware::learntSoFar() {
-    LearntSoFar learnt;
-    const std::size_t views = calibration_.online().objectViews(objectViews_);
-    for (std::size_t i = 0; i < views; ++i)
-        if (objectViews_[i].established >= config_.calibration.minModelMarkers) {
-            ++learnt.objects;
-            learnt.markers += objectViews_[i].established;
-        }
-    return learnt;
-}
-
 void Firmware::finishCalibration(const char* why) {
     char lasted[32];
-    std::snprintf(lasted, sizeof lasted, " after %.1f s", frameTime_s_ - calibrationStart_s_);
+    std::snprintf(lasted, sizeof lasted, " after %.1f s", last_.time_s - calibration_.opened_s());
     finishingEvent_ = std::string("calibration ended by ") + why + lasted;
-    const std::size_t objects = learntSoFar().objects;
+    const std::size_t objects = calibration_.learntObjects();
     if (objects == 0) {
-        state_ = FirmwareState::Tracking;
+        calibration_.close();
         ++counters_.calibrationsEmpty;
-        tracker_->reset();
+        changeState(FirmwareState::Tracking);
         note(finishingEvent_ + ": no object learnt; models unchanged");
         return;
     }
     // Completion and the save run beside the frame loop; the models from before are tracked
     // until the new ones are in use.
-    state_ = FirmwareState::Finishing;
-    tracker_->reset();
-    finisher_.start(calibration_, copyOf(models_), config_.maxModels, config_.calibration.smin,
-                    store_);
+    calibration_.finish(copyOf(models_), store_);
+    changeState(FirmwareState::Finishing);
     note(finishingEvent_ + ": finishing " + std::to_string(objects) + " objects");
 }
 
 void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
     if (state_ == FirmwareState::Finishing)
-        state_ = FirmwareState::Tracking;
-    lastFinish_s_ = finished.took_s;
+        changeState(FirmwareState::Tracking);
+    last_.completion_s = finished.took_s;
     char took[48];
     std::snprintf(took, sizeof took, ", completed in %.2f s", finished.took_s);
     const std::string event = finishingEvent_ + took;
@@ -324,25 +275,69 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
 }
 
 void Firmware::waitForFinishing() {
-    if (std::optional<FinishedCalibration> finished = finisher_.wait())
+    if (std::optional<FinishedCalibration> finished = calibration_.wait())
         takeFinishedCalibration(std::move(*finished));
 }
 
 void Firmware::deleteModels() {
-    if (state_ == FirmwareState::Calibrating) {
-        ++counters_.calibrationsAbandoned;
-        state_ = FirmwareState::Tracking;
-    }
+    if (state_ == FirmwareState::Calibrating)
+        changeState(FirmwareState::Tracking);
     const Status saved = store_.save({});
     if (!saved)
         ++counters_.flashErrors;
     setModels({});
     ++counters_.modelDeletions;
-    oneShot_ = LedPattern::Confirm;
-    oneShotUntil_ = board_.clock.now() + patternDuration(LedPattern::Confirm);
-    ledPatternSince_ = board_.clock.now();
+    statusLed_.showOnce(LedPattern::Confirm, board_.clock.now());
     note(saved ? "all models deleted (long press)"
                : "models deleted, but flash failed: " + saved.error().message);
+}
+
+void Firmware::enterDegraded(const char* why) {
+    // Frames go back before the stream stops: a backend frees its buffers when it stops.
+    for (Queued queued; queue_.pop(queued);)
+        board_.cameras.release(queued.frame);
+    board_.cameras.stop();
+    cameras_.started = false;
+    changeState(FirmwareState::Degraded);
+    cameras_.nextRetryAt = board_.clock.now() + fromSeconds(config_.cameras.retry_s);
+    board_.ledRing.setContinuous(false);
+    note(std::string("degraded: ") + why + "; retrying every " +
+         std::to_string(config_.cameras.retry_s).substr(0, 4) + " s");
+}
+
+void Firmware::retryCameras(hal::Nanoseconds now) {
+    if (now < cameras_.nextRetryAt) {
+        board_.clock.sleepUntil(std::min(cameras_.nextRetryAt, now + board_.cameras.framePeriod()));
+        return;
+    }
+    ++counters_.cameraRestarts;
+    if (Status s = board_.cameras.start(); !s) {
+        cameras_.nextRetryAt = now + fromSeconds(config_.cameras.retry_s);
+        return;
+    }
+    cameras_.started = true;
+    strobe_.restart(board_.ledRing);
+    cameras_.lastFrameAt = board_.clock.now();
+    changeState(calibration_.finishing() ? FirmwareState::Finishing : FirmwareState::Tracking);
+    note("cameras restarted");
+}
+
+LedPattern Firmware::statePattern() const {
+    switch (state_) {
+    case FirmwareState::Degraded:
+        return LedPattern::FastBlink;
+    case FirmwareState::Calibrating:
+        return LedPattern::Blink;
+    case FirmwareState::Finishing:
+        return LedPattern::Finishing;
+    case FirmwareState::Tracking:
+        break;
+    }
+    const std::span<const TrackedBody> tracked = tracker_->bodies();
+    return std::any_of(tracked.begin(), tracked.end(),
+                       [](const TrackedBody& b) { return b.found(); })
+               ? LedPattern::On
+               : LedPattern::Heartbeat;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -350,13 +345,13 @@ void Firmware::deleteModels() {
 
 void Firmware::step() {
     const hal::Nanoseconds now = board_.clock.now();
-    if (finisher_.busy())
-        if (std::optional<FinishedCalibration> finished = finisher_.poll())
+    if (calibration_.finishing())
+        if (std::optional<FinishedCalibration> finished = calibration_.poll())
             takeFinishedCalibration(std::move(*finished));
     handleButton(now);
     if (state_ == FirmwareState::Degraded) {
         retryCameras(now);
-        updateStatusLed(board_.clock.now());
+        statusLed_.update(statePattern(), board_.clock.now(), board_.statusLed);
         return;
     }
     capture();
@@ -364,8 +359,8 @@ void Firmware::step() {
         process(next.frame, next.acquiredAt, next.acquiredHost_ns);
         board_.cameras.release(next.frame);
     }
-    drainCanErrors();
-    updateStatusLed(board_.clock.now());
+    outputs_.drainCanErrors(board_.can);
+    statusLed_.update(statePattern(), board_.clock.now(), board_.statusLed);
 }
 
 void Firmware::capture() {
@@ -378,8 +373,8 @@ void Firmware::capture() {
     while (status == hal::AcquireStatus::Frame) {
         any = true;
         const hal::Nanoseconds at = board_.clock.now();
-        lastFrameAt_ = at;
-        scheduleStrobe(frame);
+        cameras_.lastFrameAt = at;
+        counters_.strobePulsesRefused += strobe_.schedule(frame, period, board_.ledRing);
         enqueue(Queued{frame, at, hostNanos()});
         status = board_.cameras.acquire(frame, 0);
     }
@@ -390,7 +385,7 @@ void Firmware::capture() {
         enterDegraded("the cameras stopped");
     } else if (!any && wait > 0) {
         ++counters_.cameraTimeouts;
-        if (board_.clock.now() - lastFrameAt_ > fromSeconds(config_.cameras.timeout_s))
+        if (board_.clock.now() - cameras_.lastFrameAt > fromSeconds(config_.cameras.timeout_s))
             enterDegraded("no frames from the cameras");
     }
 }
@@ -404,27 +399,6 @@ void Firmware::enqueue(const Queued& queued) {
     }
     if (!queue_.tryPush(queued)) // a queue of depth 0: the frame is dropped at once
         board_.cameras.release(queued.frame);
-}
-
-void Firmware::scheduleStrobe(const hal::StereoFrame& frame) {
-    const hal::Nanoseconds start =
-        std::min(frame.camera[0].exposureStart, frame.camera[1].exposureStart);
-    const hal::Nanoseconds end = std::max(frame.camera[0].exposureEnd, frame.camera[1].exposureEnd);
-    const hal::Nanoseconds period = board_.cameras.framePeriod();
-    const hal::Nanoseconds lead = fromSeconds(config_.gpio.strobeLead_us * 1e-6);
-    const hal::Nanoseconds tail = fromSeconds(config_.gpio.strobeTail_us * 1e-6);
-    for (int k = 1; k <= kStrobeAhead; ++k) {
-        const hal::Nanoseconds next = start + k * period;
-        if (strobing_ && next <= lastStrobeStart_ + period / 2)
-            continue;
-        if (!board_.ledRing.schedulePulse(next - lead, next + (end - start) + tail))
-            ++counters_.strobePulsesRefused;
-        lastStrobeStart_ = next;
-        strobing_ = true;
-    }
-    // Lit continuously until the pulses already cover the exposure being taken now.
-    if (++strobeFrames_ == kContinuousFrames)
-        board_.ledRing.setContinuous(false);
 }
 
 void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
@@ -445,25 +419,26 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     markers_.matchStereo();
     const std::int64_t t2 = hostNanos();
 
-    const double time_s = hal::toSeconds(frame.midExposure());
+    last_.number = frame.number;
+    last_.time_s = hal::toSeconds(frame.midExposure());
     if (state_ == FirmwareState::Calibrating) {
-        calibrationStep(time_s);
+        const SessionStep step = calibration_.update(last_.time_s, markers_.points_rig_mm());
+        if (step == SessionStep::BufferFull)
+            ++counters_.sessionFramesRefused;
+        if (step != SessionStep::Continue)
+            finishCalibration(endReason(step));
     } else {
-        tracker_->update(time_s, markers_.points_rig_mm());
-        const std::span<const TrackedBody> tracked = tracker_->bodies();
-        for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
-            if (tracked[b].found())
-                outputPoses_[b] = filters_[b].update(time_s, tracked[b].T_rig_from_model);
+        tracker_->update(last_.time_s, markers_.points_rig_mm());
+        outputs_.updatePoses(last_.time_s, tracker_->bodies());
     }
     const std::int64_t t3 = hostNanos();
     sendOutputs(frame, acquiredAt, acquiredHost_ns);
     const std::int64_t t4 = hostNanos();
 
-    stageTimes_[static_cast<std::size_t>(Stage::Blobs)].add(static_cast<double>(t1 - t0) * 1e-3);
-    stageTimes_[static_cast<std::size_t>(Stage::Stereo)].add(static_cast<double>(t2 - t1) * 1e-3);
-    stageTimes_[static_cast<std::size_t>(Stage::Track)].add(static_cast<double>(t3 - t2) * 1e-3);
-    stageTimes_[static_cast<std::size_t>(Stage::Output)].add(static_cast<double>(t4 - t3) * 1e-3);
-    stageTimes_[static_cast<std::size_t>(Stage::Frame)].add(static_cast<double>(t4 - t0) * 1e-3);
+    const std::int64_t stageEnds[kStageCount] = {t1, t2, t3, t4, t4};
+    const std::int64_t stageStarts[kStageCount] = {t0, t1, t2, t3, t0};
+    for (std::size_t s = 0; s < kStageCount; ++s)
+        stageTimes_[s].add(static_cast<double>(stageEnds[s] - stageStarts[s]) * 1e-3);
     const hal::Nanoseconds budget = config_.health.frameBudget_ms > 0.0
                                         ? fromSeconds(config_.health.frameBudget_ms * 1e-3)
                                         : board_.cameras.framePeriod();
@@ -475,180 +450,25 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
-    lastFrame_ = frame.number;
-    frameTime_s_ = time_s;
 }
-
-// ---------------------------------------------------------------------------------------------
-// Outputs
 
 void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
                            std::int64_t acquiredHost_ns) {
     // Time on the board's clock until the frame was in hand, then the host's time spent on it:
     // on the real board both are CLOCK_MONOTONIC; the simulated board's clock is virtual.
-    const double latency_s = hal::toSeconds(acquiredAt - frame.midExposure()) +
-                             static_cast<double>(hostNanos() - acquiredHost_ns) * 1e-9;
-    lastLatency_s_ = latency_s;
-    if (config_.udp.enabled)
-        sendDtrack(frame, latency_s);
-    if (config_.can.enabled && tracksModels())
-        sendCan(frame, latency_s);
-}
-
-void Firmware::sendDtrack(const hal::StereoFrame& frame, double latency_s) {
-    dtrackBodies_.clear();
-    if (tracksModels()) {
-        const std::span<const TrackedBody> tracked = tracker_->bodies();
-        for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b)
-            if (tracked[b].found())
-                dtrackBodies_.push_back({tracked[b].modelId, 1.0, outputPoses_[b]});
-    }
-    if (state_ != FirmwareState::Calibrating) {
-        // Every frame carries its `3d` line: `3d 0` clears a client's preview markers.
-        dtrackMarkers_.clear();
-    } else if (config_.session.previewRate_hz > 0.0 &&
-               frameTime_s_ - lastPreview_s_ >= 1.0 / config_.session.previewRate_hz) {
-        lastPreview_s_ = frameTime_s_;
-        dtrackMarkers_.clear();
-        // The growing models where they are now: established members, id = object * 1000 +
-        // marker, so a viewer can colour them by object. Refreshed at the preview rate and
-        // repeated in the frames between.
-        calibration_.online().forEachMember([&](const ObjectCalibrator::MemberView& m) {
-            if (m.established && dtrackMarkers_.size() < kMaxPreviewMarkers)
-                dtrackMarkers_.push_back(
-                    {m.objectId * 1000 + m.markerId % 1000, 1.0, m.position_rig_mm});
-        });
-    }
-    DtrackFrame out;
-    out.frame = frame.number;
-    out.midExposureUtc_ns = frame.midExposure() + board_.clock.utcOffset();
-    out.calibrated = static_cast<std::uint32_t>(models_.size());
-    out.bodies = dtrackBodies_;
-    out.markers = dtrackMarkers_;
-    if (config_.udp.latencyLine)
-        out.latency_s = latency_s;
-    const std::size_t length = formatDtrack(out, datagram_);
-    if (length == 0) {
-        ++counters_.udpTooLarge;
-        return;
-    }
-    const std::span<const std::uint8_t> bytes(
-        reinterpret_cast<const std::uint8_t*>(datagram_.data()), length);
-    for (const hal::UdpEndpoint& to : config_.udp.destinations) {
-        if (board_.udp.send(to, bytes) == hal::UdpSendResult::Sent)
-            ++counters_.udpSent;
-        else
-            ++counters_.udpFailed;
-    }
-}
-
-void Firmware::sendCan(const hal::StereoFrame& frame, double latency_s) {
-    auto send = [&](const hal::CanFrame& canFrame) {
-        switch (board_.can.send(canFrame)) {
-        case hal::CanSendResult::Queued:
-            ++counters_.canSent;
-            break;
-        case hal::CanSendResult::DroppedOldest:
-            ++counters_.canSent;
-            ++counters_.canDropped;
-            break;
-        default:
-            ++counters_.canRefused;
-            break;
-        }
-    };
-    const std::span<const TrackedBody> tracked = tracker_->bodies();
-    for (std::size_t b = 0; b < tracked.size() && b < outputPoses_.size(); ++b) {
-        const TrackedBody& body = tracked[b];
-        if (body.modelId >= config_.can.layout.maxBodies) {
-            ++counters_.canBodiesBeyondLayout;
-            continue;
-        }
-        CanPose pose;
-        pose.body = body.modelId;
-        pose.found = body.found();
-        pose.frame = frame.number;
-        pose.T_rig_from_model = outputPoses_[b];
-        pose.markers = body.markers;
-        pose.rms_mm = body.rms_mm;
-        pose.latency_s = latency_s;
-        if (config_.can.fd) {
-            send(encodeFdPose(pose, config_.can.layout));
-            continue;
-        }
-        const std::array<hal::CanFrame, 3> frames = encodeClassicPose(pose, config_.can.layout);
-        // A body not found sends its status only: the bus carries what a receiver can use.
-        for (std::size_t i = pose.found ? 0 : 2; i < frames.size(); ++i)
-            send(frames[i]);
-    }
-}
-
-void Firmware::drainCanErrors() {
-    hal::CanErrorEvent event;
-    while (board_.can.nextError(event))
-        ++counters_.canErrors;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Degraded state and the status LED
-
-void Firmware::enterDegraded(const char* why) {
-    // Frames go back before the stream stops: a backend frees its buffers when it stops.
-    for (Queued queued; queue_.pop(queued);)
-        board_.cameras.release(queued.frame);
-    board_.cameras.stop();
-    cameraStarted_ = false;
+    last_.latency_s = hal::toSeconds(acquiredAt - frame.midExposure()) +
+                      static_cast<double>(hostNanos() - acquiredHost_ns) * 1e-9;
     if (state_ == FirmwareState::Calibrating)
-        ++counters_.calibrationsAbandoned;
-    state_ = FirmwareState::Degraded;
-    nextRetryAt_ = board_.clock.now() + fromSeconds(config_.cameras.retry_s);
-    board_.ledRing.setContinuous(false);
-    note(std::string("degraded: ") + why + "; retrying every " +
-         std::to_string(config_.cameras.retry_s).substr(0, 4) + " s");
-}
-
-void Firmware::retryCameras(hal::Nanoseconds now) {
-    if (now < nextRetryAt_) {
-        board_.clock.sleepUntil(std::min(nextRetryAt_, now + board_.cameras.framePeriod()));
-        return;
-    }
-    ++counters_.cameraRestarts;
-    if (Status s = board_.cameras.start(); !s) {
-        nextRetryAt_ = now + fromSeconds(config_.cameras.retry_s);
-        return;
-    }
-    cameraStarted_ = true;
-    strobing_ = false;
-    strobeFrames_ = 0;
-    board_.ledRing.setContinuous(true);
-    lastFrameAt_ = board_.clock.now();
-    tracker_->reset();
-    state_ = finisher_.busy() ? FirmwareState::Finishing : FirmwareState::Tracking;
-    note("cameras restarted");
-}
-
-void Firmware::updateStatusLed(hal::Nanoseconds now) {
-    LedPattern pattern = LedPattern::Heartbeat;
-    if (now < oneShotUntil_)
-        pattern = oneShot_;
-    else if (state_ == FirmwareState::Degraded)
-        pattern = LedPattern::FastBlink;
-    else if (state_ == FirmwareState::Calibrating)
-        pattern = LedPattern::Blink;
-    else if (state_ == FirmwareState::Finishing)
-        pattern = LedPattern::Finishing;
-    else if (std::any_of(tracker_->bodies().begin(), tracker_->bodies().end(),
-                         [](const TrackedBody& b) { return b.found(); }))
-        pattern = LedPattern::On;
-    if (pattern != ledPattern_) {
-        ledPattern_ = pattern;
-        ledPatternSince_ = now;
-    }
-    const bool on = ledLevel(pattern, now - ledPatternSince_);
-    if (on != ledOn_) {
-        ledOn_ = on;
-        board_.statusLed.set(on);
-    }
+        outputs_.preview(last_.time_s, calibration_.online());
+    else
+        outputs_.clearPreview();
+    OutputFrame out;
+    out.number = frame.number;
+    out.midExposureUtc_ns = frame.midExposure() + board_.clock.utcOffset();
+    out.latency_s = last_.latency_s;
+    out.calibrated = static_cast<std::uint32_t>(models_.size());
+    out.bodies = bodies();
+    outputs_.send(out, board_.udp, board_.can);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -662,21 +482,21 @@ std::string Firmware::statusLine() const {
     const StageTime& frame = stageTime(Stage::Frame);
     if (state_ == FirmwareState::Calibrating)
         std::snprintf(line, sizeof line, "%s: frame %llu, %zu objects", stateName(state_),
-                      static_cast<unsigned long long>(lastFrame_), calibrationObjects());
+                      static_cast<unsigned long long>(last_.number), calibrationObjects());
     else
         std::snprintf(line, sizeof line, "%s: frame %llu, %zu of %zu bodies", stateName(state_),
-                      static_cast<unsigned long long>(lastFrame_), found, models_.size());
+                      static_cast<unsigned long long>(last_.number), found, models_.size());
     std::string text = line;
     std::snprintf(line, sizeof line,
                   "; frame %.2f ms (max %.2f), latency %.2f ms; dropped %llu, over budget %llu; "
                   "udp %llu sent, can %llu sent",
-                  frame.mean_us * 1e-3, frame.max_us * 1e-3, lastLatency_s_ * 1e3,
+                  frame.mean_us * 1e-3, frame.max_us * 1e-3, last_.latency_s * 1e3,
                   static_cast<unsigned long long>(counters_.framesDroppedQueue +
                                                   board_.cameras.counters().droppedUnpaired +
                                                   board_.cameras.counters().droppedNoBuffer),
                   static_cast<unsigned long long>(counters_.framesOverBudget),
-                  static_cast<unsigned long long>(counters_.udpSent),
-                  static_cast<unsigned long long>(counters_.canSent));
+                  static_cast<unsigned long long>(outputs_.counters().udpSent),
+                  static_cast<unsigned long long>(outputs_.counters().canSent));
     return text + line;
 }
 
@@ -718,21 +538,22 @@ std::string Firmware::statusReport() const {
     const ModelTrackingCounters& t = tracker_->counters();
     row("tracking: points refused", t.pointOverflow);
     row("tracking: frames out of budget", t.budgetExhausted);
-    row("udp sent", c.udpSent);
-    row("udp failed", c.udpFailed);
-    row("udp frames too large", c.udpTooLarge);
-    row("can sent", c.canSent);
-    row("can dropped (queue full)", c.canDropped);
-    row("can refused (bus-off, down)", c.canRefused);
-    row("can error events", c.canErrors);
-    row("can bodies beyond the layout", c.canBodiesBeyondLayout);
+    const OutputCounters& o = outputs_.counters();
+    row("udp sent", o.udpSent);
+    row("udp failed", o.udpFailed);
+    row("udp frames too large", o.udpTooLarge);
+    row("can sent", o.canSent);
+    row("can dropped (queue full)", o.canDropped);
+    row("can refused (bus-off, down)", o.canRefused);
+    row("can error events", o.canErrors);
+    row("can bodies beyond the layout", o.canBodiesBeyondLayout);
     row("calibrations started", c.calibrationsStarted);
     row("calibrations saved", c.calibrationsSaved);
     row("calibrations with no object", c.calibrationsEmpty);
     row("calibrations abandoned", c.calibrationsAbandoned);
     row("calibration frames refused (buffer)", c.sessionFramesRefused);
     std::snprintf(line, sizeof line, "%-34s %.2f\n", "last calibration completed in (s)",
-                  lastFinish_s_);
+                  last_.completion_s);
     out += line;
     row("models refused (max_models)", c.modelOverflow);
     row("learnt fragments dropped", c.fragmentsDropped);

@@ -12,14 +12,14 @@
 #include "core/calibration_session.hpp"
 #include "core/marker_pipeline.hpp"
 #include "core/model_tracker.hpp"
-#include "core/pose_filter.hpp"
 #include "core/ring_buffer.hpp"
 #include "firmware_app/button_input.hpp"
-#include "firmware_app/calibration_finisher.hpp"
+#include "firmware_app/field_calibration.hpp"
 #include "firmware_app/firmware_config.hpp"
 #include "firmware_app/model_store.hpp"
-#include "firmware_app/output/dtrack.hpp"
+#include "firmware_app/pose_outputs.hpp"
 #include "firmware_app/status_pattern.hpp"
+#include "firmware_app/strobe_scheduler.hpp"
 #include "hal/hal.hpp"
 
 namespace edgetrack::app {
@@ -70,16 +70,6 @@ struct FirmwareCounters {
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;
-    std::uint64_t udpSent = 0;
-    std::uint64_t udpFailed = 0;
-    /// DTrack frames larger than the datagram buffer; not sent.
-    std::uint64_t udpTooLarge = 0;
-    std::uint64_t canSent = 0;
-    std::uint64_t canDropped = 0;
-    std::uint64_t canRefused = 0;
-    std::uint64_t canErrors = 0;
-    /// Bodies whose model id is beyond the CAN layout's bodies; not sent on CAN.
-    std::uint64_t canBodiesBeyondLayout = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;
@@ -134,7 +124,7 @@ public:
 
     FirmwareState state() const { return state_; }
     /// \return true once cameras, flash and outputs are up: when systemd may be told READY=1.
-    bool ready() const { return cameraStarted_ && state_ != FirmwareState::Degraded; }
+    bool ready() const { return cameras_.started && state_ != FirmwareState::Degraded; }
     std::span<const NamedModel> models() const { return models_; }
     /// \return the bodies after the last processed frame (empty while calibrating).
     std::span<const TrackedBody> bodies() const;
@@ -147,13 +137,14 @@ public:
         return stageTimes_[static_cast<std::size_t>(stage)];
     }
     /// \return frame number of the last processed frame.
-    std::uint64_t lastFrame() const { return lastFrame_; }
+    std::uint64_t lastFrame() const { return last_.number; }
     /// \return mid-exposure of the last processed frame (s, the board's clock).
-    double lastFrameTime_s() const { return frameTime_s_; }
+    double lastFrameTime_s() const { return last_.time_s; }
     /// \return the marker front end: the last processed frame's blobs and 3D markers.
     const MarkerPipeline& markerPipeline() const { return markers_; }
     /// \return latency of the last processed frame, mid-exposure to send (s).
-    double lastLatency_s() const { return lastLatency_s_; }
+    double lastLatency_s() const { return last_.latency_s; }
+    const OutputCounters& outputCounters() const { return outputs_.counters(); }
     /// \return what start-up found on flash, and the last event worth telling (one line each).
     const std::string& flashReport() const { return flashReport_; }
     const std::string& lastEvent() const { return lastEvent_; }
@@ -164,17 +155,12 @@ public:
     std::string statusReport() const;
 
 private:
+    /// The one place the state changes; a calibration left for any state but Finishing is
+    /// counted as abandoned.
+    void changeState(FirmwareState next);
     void handleButton(hal::Nanoseconds now);
     void startCalibration();
     void finishCalibration(const char* why);
-    /// What the running session would export now; it has settled when this stops changing.
-    struct LearntSoFar {
-        std::size_t objects = 0;
-        std::size_t markers = 0;
-        bool operator==(const LearntSoFar&) const = default;
-    };
-    /// The online objects with at least min_model_markers established markers, and those markers.
-    LearntSoFar learntSoFar();
     void takeFinishedCalibration(FinishedCalibration finished);
     /// Tracking or Finishing: the known models are tracked and sent.
     bool tracksModels() const {
@@ -186,78 +172,63 @@ private:
     struct Queued;
     void capture();
     void enqueue(const Queued& queued);
-    void scheduleStrobe(const hal::StereoFrame& frame);
     void process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
                  std::int64_t acquiredHost_ns);
-    void calibrationStep(double time_s);
     void sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
                      std::int64_t acquiredHost_ns);
-    void sendDtrack(const hal::StereoFrame& frame, double latency_s);
-    void sendCan(const hal::StereoFrame& frame, double latency_s);
-    void drainCanErrors();
     void enterDegraded(const char* why);
     void retryCameras(hal::Nanoseconds now);
-    void updateStatusLed(hal::Nanoseconds now);
+    LedPattern statePattern() const;
     void note(std::string event);
 
+    // Every member below is one job of the board (a pipeline stage, a device, a piece of state):
+    // about twenty, each a class with its own storage.
     FirmwareConfig config_;
     hal::Board& board_;
     std::string error_;
+    FirmwareState state_ = FirmwareState::Tracking;
+    ButtonInput button_;
 
-    // Frame pipeline, sized by the constructor.
-    MarkerPipeline markers_;
-    std::optional<ModelTracker> tracker_;
-    std::vector<PoseFilter> filters_;
-    /// Per body: the pose sent (filtered when the filter is on), model to rig (mm).
-    std::vector<RigidTransform> outputPoses_;
-    CalibrationSession calibration_;
-    CalibrationFinisher finisher_;
-    std::vector<CalibrationObjectView> objectViews_;
-    /// "calibration ended by ... after ... s", kept until the finished models are in use.
-    std::string finishingEvent_;
-    /// A long press while finishing: the models are deleted once the worker is done.
-    bool deletePending_ = false;
-    double lastFinish_s_ = 0.0;
-    std::vector<NamedModel> models_;
-    ModelStore store_;
-
-    // Capture queue: frames taken from the cameras and not yet processed, oldest first.
+    // Frames: the capture queue (taken from the cameras, not yet processed, oldest first), the
+    // strobe, the cameras' health, the marker front end.
     struct Queued {
         hal::StereoFrame frame;
         hal::Nanoseconds acquiredAt = 0;
         std::int64_t acquiredHost_ns = 0;
     };
     RingBuffer<Queued> queue_{0};
+    StrobeScheduler strobe_;
+    struct CameraHealth {
+        bool started = false;
+        hal::Nanoseconds lastFrameAt = 0;
+        hal::Nanoseconds nextRetryAt = 0;
+    } cameras_;
+    MarkerPipeline markers_;
 
-    // Outputs.
-    std::vector<DtrackBody> dtrackBodies_;
-    std::vector<DtrackMarker> dtrackMarkers_;
-    std::vector<char> datagram_;
+    // Models: the set in use, on flash, tracked; a field calibration.
+    std::vector<NamedModel> models_;
+    ModelStore store_;
+    std::optional<ModelTracker> tracker_;
+    FieldCalibration calibration_;
+    /// Finishing: "calibration ended by ... after ... s", and a long press waiting for the end.
+    std::string finishingEvent_;
+    bool deletePending_ = false;
 
-    // State.
-    FirmwareState state_ = FirmwareState::Tracking;
-    bool cameraStarted_ = false;
-    hal::Nanoseconds lastFrameAt_ = 0;
-    hal::Nanoseconds nextRetryAt_ = 0;
-    hal::Nanoseconds lastStrobeStart_ = 0;
-    bool strobing_ = false;
-    std::uint64_t strobeFrames_ = 0;
-    ButtonInput button_;
-    LedPattern ledPattern_ = LedPattern::Heartbeat;
-    hal::Nanoseconds ledPatternSince_ = 0;
-    bool ledOn_ = false;
-    hal::Nanoseconds oneShotUntil_ = 0;
-    LedPattern oneShot_ = LedPattern::Confirm;
-    double calibrationStart_s_ = 0.0;
-    double calibrationChanged_s_ = 0.0;
-    double lastPreview_s_ = -1e9;
-    LearntSoFar learntSoFar_;
-    double frameTime_s_ = 0.0;
+    PoseOutputs outputs_;
+    StatusLedDriver statusLed_;
 
+    // Status view.
+    struct LastFrame {
+        std::uint64_t number = 0;
+        /// Mid-exposure (s, the board's clock).
+        double time_s = 0.0;
+        /// Mid-exposure to sending (s).
+        double latency_s = 0.0;
+        /// How long the last calibration's completion took (s).
+        double completion_s = 0.0;
+    } last_;
     FirmwareCounters counters_{};
     std::array<StageTime, kStageCount> stageTimes_{};
-    std::uint64_t lastFrame_ = 0;
-    double lastLatency_s_ = 0.0;
     std::string flashReport_;
     std::string lastEvent_;
 };

@@ -1,4 +1,4 @@
-// Status LED blink patterns.
+// What the status LED shows in each state of the board, as a function of time.
 #include "firmware_app/status_pattern.hpp"
 
 namespace edgetrack::app {
@@ -39,6 +39,26 @@ bool ledLevel(LedPattern pattern, hal::Nanoseconds since) {
 
 hal::Nanoseconds patternDuration(LedPattern pattern) {
     return pattern == LedPattern::Confirm ? 1500 * kMs : 0;
+}
+
+void StatusLedDriver::showOnce(LedPattern pattern, hal::Nanoseconds now) {
+    oneShot_ = pattern;
+    oneShotUntil_ = now + patternDuration(pattern);
+    shown_ = pattern;
+    shownSince_ = now;
+}
+
+void StatusLedDriver::update(LedPattern statePattern, hal::Nanoseconds now, hal::StatusLed& led) {
+    const LedPattern pattern = now < oneShotUntil_ ? oneShot_ : statePattern;
+    if (pattern != shown_) {
+        shown_ = pattern;
+        shownSince_ = now;
+    }
+    const bool on = ledLevel(pattern, now - shownSince_);
+    if (on != on_) {
+        on_ = on;
+        led.set(on);
+    }
 }
 
 } // namespace edgetrack::app

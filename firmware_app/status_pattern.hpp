@@ -1,6 +1,7 @@
 // What the status LED shows in each state of the board, as a function of time.
 #pragma once
 
+#include "hal/status_led.hpp"
 #include "hal/types.hpp"
 
 namespace edgetrack::app {
@@ -28,5 +29,22 @@ bool ledLevel(LedPattern pattern, hal::Nanoseconds since);
 
 /// \brief How long a one-shot pattern lasts (0 for the continuing ones).
 hal::Nanoseconds patternDuration(LedPattern pattern);
+
+/// \brief Drives the status LED: the board state's pattern, or for a while a one-shot pattern.
+class StatusLedDriver {
+public:
+    /// \brief Show \a pattern once from \a now (e.g. Confirm), over the state's own.
+    void showOnce(LedPattern pattern, hal::Nanoseconds now);
+    /// \brief Set \a led as it should be at \a now, showing \a statePattern unless a one-shot
+    /// pattern is running; switches it only when its level changes.
+    void update(LedPattern statePattern, hal::Nanoseconds now, hal::StatusLed& led);
+
+private:
+    LedPattern shown_ = LedPattern::Heartbeat;
+    hal::Nanoseconds shownSince_ = 0;
+    bool on_ = false;
+    LedPattern oneShot_ = LedPattern::Confirm;
+    hal::Nanoseconds oneShotUntil_ = 0;
+};
 
 } // namespace edgetrack::app

@@ -676,8 +676,8 @@ TEST(FirmwareOnSimBoard, NoHeapAllocationPerFrame) {
     }
     EXPECT_EQ(guard.allocations(), 0u);
     EXPECT_EQ(firmware.counters().framesProcessed, 300u + kGuardedFrames);
-    EXPECT_GE(firmware.counters().udpSent, 300u + kGuardedFrames);
-    EXPECT_GE(firmware.counters().canSent, 2u * kGuardedFrames);
+    EXPECT_GE(firmware.outputCounters().udpSent, 300u + kGuardedFrames);
+    EXPECT_GE(firmware.outputCounters().canSent, 2u * kGuardedFrames);
 }
 
 TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
