@@ -4,7 +4,7 @@
 
 #include <benchmark/benchmark.h>
 
-#include "firmware_app/firmware.hpp"
+#include "firmware_app/firmware/firmware.hpp"
 #include "hal/sim/sim_board.hpp"
 #include "tests/support/sim_models.hpp"
 

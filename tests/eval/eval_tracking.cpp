@@ -31,7 +31,7 @@
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/stereo_matcher.hpp"
-#include "firmware_app/model_file.hpp"
+#include "firmware_app/formats/model_file.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
 #include "tests/eval/sim_image_pipeline.hpp"

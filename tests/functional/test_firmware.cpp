@@ -14,8 +14,8 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/firmware.hpp"
-#include "firmware_app/output/dtrack.hpp"
+#include "firmware_app/firmware/dtrack.hpp"
+#include "firmware_app/firmware/firmware.hpp"
 #include "hal/linux/posix_udp_sender.hpp"
 #include "hal/sim/scene.hpp"
 #include "hal/sim/sim_board.hpp"

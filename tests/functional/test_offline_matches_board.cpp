@@ -8,11 +8,11 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/calibrate_command.hpp"
-#include "firmware_app/firmware.hpp"
-#include "firmware_app/model_file.hpp"
-#include "firmware_app/reconstruct_command.hpp"
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/firmware/firmware.hpp"
+#include "firmware_app/formats/model_file.hpp"
+#include "firmware_app/formats/recording.hpp"
+#include "firmware_app/tools/calibrate_command.hpp"
+#include "firmware_app/tools/reconstruct_command.hpp"
 #include "hal/sim/scene.hpp"
 #include "hal/sim/sim_board.hpp"
 #include "tests/support/temp_dir.hpp"

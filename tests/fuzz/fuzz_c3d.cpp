@@ -2,7 +2,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "firmware_app/recording/c3d.hpp"
+#include "firmware_app/formats/c3d.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

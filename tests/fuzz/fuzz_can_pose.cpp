@@ -2,7 +2,7 @@
 #include <cmath>
 #include <cstdint>
 
-#include "firmware_app/output/can_pose.hpp"
+#include "firmware_app/firmware/can_pose.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

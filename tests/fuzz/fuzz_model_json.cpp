@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "firmware_app/model_file.hpp"
+#include "firmware_app/formats/model_file.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

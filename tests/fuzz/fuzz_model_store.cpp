@@ -2,7 +2,7 @@
 #include <cstdint>
 #include <span>
 
-#include "firmware_app/model_store.hpp"
+#include "firmware_app/firmware/model_store.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <set>
 
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/formats/recording.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 namespace {

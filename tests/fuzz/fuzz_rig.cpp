@@ -3,7 +3,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/formats/recording.hpp"
 #include "tests/fuzz/fuzz_input.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -16,7 +16,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/output/can_pose.hpp"
+#include "firmware_app/firmware/can_pose.hpp"
 #include "hal/linux/posix_clock.hpp"
 #include "hal/linux/socketcan_bus.hpp"
 #include "tests/support/dbc.hpp"

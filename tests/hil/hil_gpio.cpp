@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/button_input.hpp"
+#include "firmware_app/firmware/button_input.hpp"
 #include "hal/linux/gpiod_devices.hpp"
 #include "hal/linux/posix_clock.hpp"
 

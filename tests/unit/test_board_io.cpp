@@ -1,8 +1,8 @@
 // Tests of the button's debouncing and press classification, and of the status LED patterns.
 #include <gtest/gtest.h>
 
-#include "firmware_app/button_input.hpp"
-#include "firmware_app/status_pattern.hpp"
+#include "firmware_app/firmware/button_input.hpp"
+#include "firmware_app/firmware/status_pattern.hpp"
 
 namespace edgetrack::app {
 namespace {

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/c3d.hpp"
+#include "firmware_app/formats/c3d.hpp"
 
 namespace edgetrack::recording {
 namespace {

@@ -14,7 +14,7 @@
 #include "core/model_tracker.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
-#include "firmware_app/recording/c3d.hpp"
+#include "firmware_app/formats/c3d.hpp"
 #include "tests/support/model_alignment.hpp"
 
 namespace edgetrack {

@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/output/can_log.hpp"
+#include "firmware_app/app/can_log.hpp"
 #include "hal/sim/devices.hpp"
 #include "tests/support/temp_dir.hpp"
 

@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/output/can_pose.hpp"
+#include "firmware_app/firmware/can_pose.hpp"
 #include "tests/support/dbc.hpp"
 
 namespace edgetrack::app {

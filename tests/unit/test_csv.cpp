@@ -3,7 +3,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/csv.hpp"
+#include "firmware_app/formats/csv.hpp"
 
 using namespace edgetrack;
 using namespace edgetrack::recording;

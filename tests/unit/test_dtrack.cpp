@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/output/dtrack.hpp"
+#include "firmware_app/firmware/dtrack.hpp"
 #include "tests/support/alloc_guard.hpp"
 
 namespace edgetrack::app {

@@ -5,7 +5,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/firmware_config.hpp"
+#include "firmware_app/firmware/firmware_config.hpp"
 
 namespace edgetrack::app {
 namespace {

@@ -3,10 +3,10 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/output/dtrack.hpp"
-#include "firmware_app/pose_outputs.hpp"
-#include "firmware_app/status_pattern.hpp"
-#include "firmware_app/strobe_scheduler.hpp"
+#include "firmware_app/firmware/dtrack.hpp"
+#include "firmware_app/firmware/pose_outputs.hpp"
+#include "firmware_app/firmware/status_pattern.hpp"
+#include "firmware_app/firmware/strobe_scheduler.hpp"
 
 namespace edgetrack::app {
 namespace {

@@ -4,9 +4,9 @@
 #include <gtest/gtest.h>
 
 #include "core/marker_set.hpp"
-#include "firmware_app/model_command.hpp"
-#include "firmware_app/model_file.hpp"
-#include "firmware_app/model_store.hpp"
+#include "firmware_app/firmware/model_store.hpp"
+#include "firmware_app/formats/model_file.hpp"
+#include "firmware_app/tools/model_command.hpp"
 #include "hal/linux/file_flash.hpp"
 #include "hal/sim/scene.hpp"
 #include "tests/support/layouts.hpp"

@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/model_file.hpp"
+#include "firmware_app/formats/model_file.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace edgetrack::app {

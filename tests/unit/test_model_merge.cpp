@@ -3,7 +3,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/model_merge.hpp"
+#include "firmware_app/firmware/model_merge.hpp"
 #include "hal/sim/scene.hpp"
 #include "tests/support/layouts.hpp"
 

@@ -4,7 +4,7 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/model_store.hpp"
+#include "firmware_app/firmware/model_store.hpp"
 #include "hal/sim/devices.hpp"
 #include "tests/support/layouts.hpp"
 

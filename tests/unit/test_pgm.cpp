@@ -1,7 +1,7 @@
 // Tests of the PGM reader: 8-bit P5 only, size checked against the rig, truncation detected.
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/formats/recording.hpp"
 #include "tests/support/temp_dir.hpp"
 
 using namespace edgetrack;

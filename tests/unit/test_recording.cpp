@@ -1,7 +1,7 @@
 // Tests of the recording files (frames, blobs, points, truth, truth/) and the choice of level.
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/formats/recording.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/unit/rig_fixtures.hpp"
 

@@ -1,7 +1,7 @@
 // Tests of rig.toml: round trip, extra keys ignored, every malformed key named with its line.
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/recording.hpp"
+#include "firmware_app/formats/recording.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/unit/rig_fixtures.hpp"
 

@@ -5,8 +5,8 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/recording/recording.hpp"
-#include "firmware_app/sim_command.hpp"
+#include "firmware_app/formats/recording.hpp"
+#include "firmware_app/tools/sim_command.hpp"
 #include "hal/sim/scene.hpp"
 #include "tests/support/temp_dir.hpp"
 

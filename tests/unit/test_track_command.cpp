@@ -3,12 +3,12 @@
 
 #include <gtest/gtest.h>
 
-#include "firmware_app/calibrate_command.hpp"
-#include "firmware_app/model_file.hpp"
-#include "firmware_app/pose_file.hpp"
-#include "firmware_app/recording/csv.hpp"
-#include "firmware_app/sim_command.hpp"
-#include "firmware_app/track_command.hpp"
+#include "firmware_app/formats/csv.hpp"
+#include "firmware_app/formats/model_file.hpp"
+#include "firmware_app/formats/pose_file.hpp"
+#include "firmware_app/tools/calibrate_command.hpp"
+#include "firmware_app/tools/sim_command.hpp"
+#include "firmware_app/tools/track_command.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace edgetrack::app {

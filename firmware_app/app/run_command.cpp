@@ -1,0 +1,338 @@
+// `edgetrack run`: picks the board backend, wires it to the firmware and runs the loop.
+#include "firmware_app/app/run_command.hpp"
+
+#include <atomic>
+#include <csignal>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <optional>
+#include <poll.h>
+#include <string_view>
+#include <systemd/sd-daemon.h>
+#include <unistd.h>
+
+#include "firmware_app/app/can_log.hpp"
+#include "firmware_app/firmware/firmware.hpp"
+#include "firmware_app/formats/model_file.hpp"
+#include "firmware_app/formats/recording.hpp"
+#include "hal/linux/linux_board.hpp"
+#include "hal/linux/posix_udp_sender.hpp"
+#include "hal/sim/scene.hpp"
+#include "hal/sim/sim_board.hpp"
+
+namespace edgetrack::app {
+
+namespace {
+
+std::atomic<bool> stopRequested{false};
+std::atomic<bool> reportRequested{false};
+
+extern "C" void onStopSignal(int) {
+    stopRequested = true;
+}
+extern "C" void onReportSignal(int) {
+    reportRequested = true;
+}
+
+/// Button presses typed on standard input, for the simulated board's push button.
+class StdinButton {
+public:
+    explicit StdinButton(bool enabled)
+        : enabled_(enabled) {}
+
+    enum class Press { None, Short, Long, Status };
+
+    Press poll() {
+        if (!enabled_)
+            return Press::None;
+        pollfd fd{STDIN_FILENO, POLLIN, 0};
+        if (::poll(&fd, 1, 0) <= 0 || (fd.revents & (POLLIN | POLLHUP)) == 0)
+            return Press::None;
+        char buffer[64];
+        const ssize_t n = ::read(STDIN_FILENO, buffer, sizeof buffer);
+        if (n <= 0) {
+            enabled_ = false; // end of input: no more presses
+            return Press::None;
+        }
+        const std::string_view line(buffer, static_cast<std::size_t>(n));
+        if (line.starts_with("l"))
+            return Press::Long;
+        if (line.starts_with("s"))
+            return Press::Status;
+        return Press::Short;
+    }
+
+private:
+    bool enabled_;
+};
+
+/// Exit code asking systemd (Restart=on-failure) for a new process: EX_TEMPFAIL.
+constexpr int kExitRestart = 75;
+
+/// The stereo calibration of the real cameras, which must be for the configured image size.
+Result<StereoRig> loadBoardRig(const FirmwareConfig& config) {
+    if (config.cameras.rigFile.empty())
+        return Error{"--board linux needs the stereo calibration: set [cameras] rig (INTERFACES "
+                     "§2)"};
+    Result<StereoRig> rig = recording::readRig(config.cameras.rigFile);
+    if (!rig)
+        return rig;
+    for (int c = 0; c < 2; ++c) {
+        const CameraIntrinsics& intrinsics = rig->camera(c).intrinsics();
+        if (intrinsics.width_px != config.cameras.width_px ||
+            intrinsics.height_px != config.cameras.height_px)
+            return Error{config.cameras.rigFile.string() + ": camera " + std::to_string(c) +
+                         " is calibrated at " + std::to_string(intrinsics.width_px) + "x" +
+                         std::to_string(intrinsics.height_px) + ", [cameras] asks for " +
+                         std::to_string(config.cameras.width_px) + "x" +
+                         std::to_string(config.cameras.height_px)};
+    }
+    return rig;
+}
+
+linux_hal::LinuxBoardConfig linuxBoardConfig(const FirmwareConfig& config) {
+    linux_hal::LinuxBoardConfig board;
+    board.cameras.ids = {config.cameras.ids[0], config.cameras.ids[1]};
+    board.cameras.width_px = config.cameras.width_px;
+    board.cameras.height_px = config.cameras.height_px;
+    board.cameras.frameRate_hz = config.cameras.frameRate_hz;
+    board.cameras.exposure_us = config.cameras.exposure_us;
+    board.cameras.pairTolerance_us = config.cameras.pairTolerance_us;
+    board.cameras.buffers = config.cameras.buffers;
+    board.gpioChip = config.gpio.chip;
+    board.ledLine = config.gpio.ledLine;
+    board.buttonLine = config.gpio.buttonLine;
+    board.statusLine = config.gpio.statusLine;
+    board.buttonActiveLow = config.gpio.buttonActiveLow;
+    board.flashDevice = config.flash.device;
+    board.flashSize = config.flash.size_bytes;
+    board.flashEraseBlock = config.flash.eraseBlock_bytes;
+    board.canEnabled = config.can.enabled;
+    board.can.interface = config.can.interface;
+    board.can.fd = config.can.fd;
+    return board;
+}
+
+} // namespace
+
+int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std::ostream& err) {
+    FirmwareConfig config;
+    if (!options.config.empty()) {
+        Result<FirmwareConfig> loaded = loadFirmwareConfig(options.config);
+        if (!loaded) {
+            err << "edgetrack run: " << loaded.error().message << "\n";
+            return 1;
+        }
+        config = std::move(*loaded);
+    }
+    if (!options.udp.empty()) {
+        Result<hal::UdpEndpoint> endpoint = parseEndpoint(options.udp);
+        if (!endpoint) {
+            err << "edgetrack run: --udp " << endpoint.error().message << "\n";
+            return 2;
+        }
+        config.udp.enabled = true;
+        config.udp.destinations = {*endpoint};
+    }
+    if (!options.can.empty()) {
+        config.can.enabled = true;
+        config.can.interface = options.can;
+    }
+    if (!options.canLog.empty())
+        config.can.enabled = true;
+    // The only place that picks a backend.
+    std::unique_ptr<sim::SimBoard> sim;
+    std::unique_ptr<linux_hal::PosixUdpSender> simUdp;
+    std::unique_ptr<linux_hal::LinuxBoard> linuxBoard;
+    std::optional<hal::Board> simBoardView;
+    StereoRig rig;
+    std::string boardName;
+    if (options.board == "linux") {
+        Result<StereoRig> loaded = loadBoardRig(config);
+        if (!loaded) {
+            err << "edgetrack run: " << loaded.error().message << "\n";
+            return 1;
+        }
+        rig = *loaded;
+        linuxBoard = std::make_unique<linux_hal::LinuxBoard>(linuxBoardConfig(config));
+        if (!linuxBoard->isValid()) {
+            err << "edgetrack run: " << linuxBoard->errorText() << "\n";
+            return 1;
+        }
+        boardName = "Linux board";
+    } else {
+        const std::string sceneName = options.scene.empty() ? "two_cubes" : options.scene;
+        std::optional<sim::Scene> scene = sim::makeScene(sceneName, options.seed);
+        if (!scene) {
+            err << "edgetrack run: unknown scene '" << sceneName << "' (edgetrack sim --list)\n";
+            return 2;
+        }
+        sim::SimBoardOptions boardOptions;
+        boardOptions.realTime = true;
+        boardOptions.cameraBufferPairs = config.cameras.buffers;
+        boardOptions.flashSize = config.flash.size_bytes;
+        boardOptions.flashEraseBlock = config.flash.eraseBlock_bytes;
+        sim = std::make_unique<sim::SimBoard>(std::move(*scene), options.seed, boardOptions);
+        // The simulated board's UDP is the host's: a DTrack client on this machine sees the poses.
+        simUdp = std::make_unique<linux_hal::PosixUdpSender>();
+        if (!simUdp->isValid()) {
+            err << "edgetrack run: cannot open a UDP socket: "
+                << std::strerror(simUdp->errnoAtOpen()) << "\n";
+            return 1;
+        }
+        simBoardView.emplace(hal::Board{sim->clock, sim->cameras, sim->ledRing, sim->button,
+                                        sim->statusLed, sim->flash, sim->can, *simUdp});
+        rig = sim->world.rig();
+        boardName = "simulated board, scene '" + sceneName + "'";
+    }
+    hal::Board& backendBoard = linuxBoard ? linuxBoard->board() : *simBoardView;
+    // The CAN log sits between the firmware and the board's bus, so any board can log.
+    std::unique_ptr<CanLogBus> canLog;
+    std::optional<hal::Board> loggingBoard;
+    if (!options.canLog.empty()) {
+        canLog = std::make_unique<CanLogBus>(backendBoard.can, backendBoard.clock,
+                                             config.can.interface, options.canLog);
+        if (!canLog->isValid()) {
+            err << "edgetrack run: --can-log " << canLog->error() << "\n";
+            return 1;
+        }
+        loggingBoard.emplace(hal::Board{
+            backendBoard.clock, backendBoard.cameras, backendBoard.ledRing, backendBoard.button,
+            backendBoard.statusLed, backendBoard.flash, *canLog, backendBoard.udp});
+    }
+    hal::Board& board = loggingBoard ? *loggingBoard : backendBoard;
+
+    Firmware firmware(config, board, rig);
+    if (!firmware.isValid()) {
+        err << "edgetrack run: " << firmware.error() << "\n";
+        return 1;
+    }
+    firmware.start();
+    out << "edgetrack run: " << boardName << "; " << firmware.flashReport() << "\n";
+    if (linuxBoard)
+        out << "edgetrack run: " << linuxBoard->cameras().describe() << "\n";
+    if (!options.models.empty()) {
+        Result<std::vector<NamedModel>> models =
+            readModelDirectory(options.models, MarkerSet::kCapacity);
+        if (!models) {
+            err << "edgetrack run: " << models.error().message << "\n";
+            return 1;
+        }
+        if (Status s = firmware.replaceModels(std::move(*models)); !s) {
+            err << "edgetrack run: " << s.error().message << "\n";
+            return 1;
+        }
+        out << "edgetrack run: tracking " << firmware.models().size() << " models from "
+            << options.models.string() << "\n";
+    }
+    if (config.udp.enabled)
+        for (const hal::UdpEndpoint& to : config.udp.destinations)
+            out << "edgetrack run: DTrack UDP to " << int{to.address[0]} << "."
+                << int{to.address[1]} << "." << int{to.address[2]} << "." << int{to.address[3]}
+                << ":" << to.port << "\n";
+    const bool interactive = sim && options.buttonFromStdin && ::isatty(STDIN_FILENO) != 0;
+    if (interactive)
+        out << "edgetrack run: press Enter to start or end a calibration (the button), type "
+               "'long' to delete all models, 's' for the status view, Ctrl-C to stop\n";
+    out << std::flush;
+
+    stopRequested = false;
+    std::signal(SIGINT, onStopSignal);
+    std::signal(SIGTERM, onStopSignal);
+    std::signal(SIGUSR1, onReportSignal);
+
+    StdinButton stdinButton(sim != nullptr && options.buttonFromStdin);
+    std::uint64_t watchdogInterval_us = 0;
+    const bool watchdog = sd_watchdog_enabled(0, &watchdogInterval_us) > 0;
+    const hal::Nanoseconds statusPeriod =
+        static_cast<hal::Nanoseconds>(config.health.statusInterval_s * 1e9);
+    hal::Nanoseconds nextStatus = board.clock.now() + statusPeriod;
+    hal::Nanoseconds nextWatchdog = board.clock.now();
+    bool notifiedReady = false;
+    std::string waitingFor;
+    hal::Nanoseconds nextReadyCheck = board.clock.now();
+    const bool terminal = ::isatty(STDERR_FILENO) != 0;
+    while (!stopRequested) {
+        switch (stdinButton.poll()) {
+        case StdinButton::Press::Short:
+            sim->button.press(board.clock.now(), 200 * hal::kNanosecondsPerMillisecond);
+            break;
+        case StdinButton::Press::Long:
+            sim->button.press(board.clock.now(),
+                              static_cast<hal::Nanoseconds>((config.gpio.longPress_s + 0.3) * 1e9));
+            break;
+        case StdinButton::Press::Status:
+            reportRequested = true;
+            break;
+        case StdinButton::Press::None:
+            break;
+        }
+        firmware.step();
+        const hal::Nanoseconds now = board.clock.now();
+        if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+            err << "\nedgetrack run: a camera's device was removed while streaming; libcamera "
+                   "cannot take it back in this process: exiting so that systemd starts "
+                   "edgetrack again\n";
+            break;
+        }
+        if (!notifiedReady && firmware.ready() && now >= nextReadyCheck) {
+            // Cameras, flash and outputs up; on the real board the GPIO lines and CAN too.
+            nextReadyCheck = now + 200 * hal::kNanosecondsPerMillisecond;
+            std::string why;
+            if (linuxBoard && !linuxBoard->devicesUp(why)) {
+                if (why != waitingFor)
+                    err << "\nedgetrack run: waiting for " << why << "\n" << std::flush;
+                waitingFor = why;
+            } else {
+                sd_notify(0, "READY=1");
+                notifiedReady = true;
+                out << "edgetrack run: ready (cameras" << (linuxBoard ? ", GPIO" : "")
+                    << (config.can.enabled ? ", CAN" : "") << " up)\n"
+                    << std::flush;
+            }
+        }
+        if (watchdog && now >= nextWatchdog) {
+            sd_notify(0, "WATCHDOG=1");
+            nextWatchdog = now + static_cast<hal::Nanoseconds>(watchdogInterval_us) * 500;
+        }
+        if (statusPeriod > 0 && now >= nextStatus) {
+            const std::string line = firmware.statusLine();
+            err << (terminal ? "\r" : "") << line << (terminal ? "   " : "\n") << std::flush;
+            sd_notify(0, ("STATUS=" + line).c_str());
+            nextStatus = now + statusPeriod;
+        }
+        if (reportRequested.exchange(false))
+            err << "\n" << firmware.statusReport() << std::flush;
+        if (options.frames > 0 &&
+            firmware.counters().framesProcessed >= static_cast<std::uint64_t>(options.frames))
+            break;
+    }
+    sd_notify(0, "STOPPING=1");
+    firmware.stop();
+    std::signal(SIGINT, SIG_DFL);
+    std::signal(SIGTERM, SIG_DFL);
+    std::signal(SIGUSR1, SIG_DFL);
+    if (terminal && statusPeriod > 0)
+        err << "\n";
+    out << firmware.statusReport();
+    if (canLog) {
+        canLog->flush();
+        out << "edgetrack run: " << canLog->framesLogged() << " CAN frames logged to "
+            << options.canLog.string() << " (candump -L)";
+        if (canLog->writeFailures() > 0)
+            out << ", " << canLog->writeFailures() << " writes failed";
+        out << "\n";
+    }
+    if (linuxBoard)
+        out << linuxBoard->report();
+    if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+        out << std::flush;
+        err << std::flush;
+        // libcamera still holds the removed camera: leave without running its destructors.
+        std::_Exit(kExitRestart);
+    }
+    return 0;
+}
+
+} // namespace edgetrack::app

@@ -1,0 +1,565 @@
+// The board's frame loop: capture queue, strobe, pipeline, state machine, outputs, status.
+#include "firmware_app/firmware/firmware.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include "core/marker_set.hpp"
+#include "firmware_app/firmware/model_merge.hpp"
+
+namespace edgetrack::app {
+
+namespace {
+
+/// The host's steady clock: stage times are CPU work, also on the simulated board's virtual time.
+std::int64_t hostNanos() {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(
+               std::chrono::steady_clock::now().time_since_epoch())
+        .count();
+}
+
+hal::Nanoseconds fromSeconds(double s) {
+    return static_cast<hal::Nanoseconds>(std::llround(s * 1e9));
+}
+
+} // namespace
+
+const char* stateName(FirmwareState state) {
+    switch (state) {
+    case FirmwareState::Tracking:
+        return "tracking";
+    case FirmwareState::Calibrating:
+        return "calibrating";
+    case FirmwareState::Finishing:
+        return "finishing";
+    case FirmwareState::Degraded:
+        return "degraded";
+    }
+    return "?";
+}
+
+const char* stageName(Stage stage) {
+    static constexpr const char* kNames[kStageCount] = {"blobs", "stereo", "track", "output",
+                                                        "frame"};
+    return kNames[static_cast<std::size_t>(stage)];
+}
+
+void StageTime::add(double us) {
+    last_us = us;
+    max_us = std::max(max_us, us);
+    ++count;
+    mean_us += (us - mean_us) / static_cast<double>(count);
+}
+
+Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig)
+    : config_(config)
+    , board_(board)
+    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s))
+    , queue_(config.cameras.queueDepth)
+    , strobe_(fromSeconds(config.gpio.strobeLead_us * 1e-6),
+              fromSeconds(config.gpio.strobeTail_us * 1e-6))
+    , markers_(rig, config.markers)
+    , store_(board.flash, MarkerSet::kCapacity)
+    , calibration_(config, rig)
+    , outputs_(config) {
+    if (!markers_.isValid())
+        error_ = markers_.error();
+    if (!calibration_.isValid())
+        error_ = "[calibration] settings are unusable (markers per object must be 4 to " +
+                 std::to_string(MarkerSet::kCapacity) + ", the session buffer not empty)";
+    if (!store_.isValid())
+        error_ = "the flash partition cannot hold two model slots";
+    tracker_.emplace(std::span<const MarkerModel>{}, config.tracking);
+    if (!tracker_->isValid())
+        error_ = "[tracking] settings are unusable";
+    models_.reserve(config.maxModels);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Start, stop, models
+
+void Firmware::start() {
+    Result<StoredModels> loaded = store_.load();
+    if (loaded) {
+        std::vector<NamedModel> models = std::move(loaded->models);
+        if (models.size() > config_.maxModels) {
+            counters_.modelOverflow += models.size() - config_.maxModels;
+            models.resize(config_.maxModels);
+        }
+        const std::size_t count = models.size();
+        setModels(std::move(models));
+        flashReport_ = "loaded " + std::to_string(count) + (count == 1 ? " model" : " models") +
+                       " from flash slot " + (loaded->slot == 0 ? "A" : "B") + " (save #" +
+                       std::to_string(loaded->sequence) + ")";
+    } else {
+        setModels({});
+        flashReport_ = loaded.error().message;
+    }
+    changeState(FirmwareState::Tracking);
+    if (Status s = board_.cameras.start(); !s) {
+        enterDegraded(("cameras did not start: " + s.error().message).c_str());
+        return;
+    }
+    cameras_.started = true;
+    strobe_.restart(board_.ledRing);
+    cameras_.lastFrameAt = board_.clock.now();
+}
+
+Firmware::~Firmware() {
+    (void)calibration_.wait();
+}
+
+void Firmware::stop() {
+    // A finishing calibration's models are saved before the board stops: never lost.
+    waitForFinishing();
+    board_.cameras.stop();
+    board_.ledRing.setContinuous(false);
+    board_.statusLed.set(false);
+    cameras_.started = false;
+}
+
+void Firmware::setModels(std::vector<NamedModel> models) {
+    models_ = std::move(models);
+    std::vector<MarkerModel> layouts;
+    layouts.reserve(models_.size());
+    for (const NamedModel& m : models_)
+        layouts.push_back(copyOf(m.model));
+    tracker_.emplace(layouts, config_.tracking);
+    outputs_.resetFilters();
+}
+
+Status Firmware::replaceModels(std::vector<NamedModel> models) {
+    if (models.size() > config_.maxModels)
+        return Error{std::to_string(models.size()) + " models; [tracking] max_models is " +
+                     std::to_string(config_.maxModels)};
+    waitForFinishing();
+    Status saved = store_.save(models);
+    if (!saved)
+        ++counters_.flashErrors;
+    setModels(std::move(models));
+    return saved;
+}
+
+std::span<const TrackedBody> Firmware::bodies() const {
+    if (!tracksModels())
+        return {};
+    return tracker_->bodies();
+}
+
+std::size_t Firmware::calibrationObjects() const {
+    return calibration_.objectCount();
+}
+
+void Firmware::note(std::string event) {
+    lastEvent_ = std::move(event);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The state machine
+
+void Firmware::changeState(FirmwareState next) {
+    if (state_ == FirmwareState::Calibrating && next != FirmwareState::Finishing &&
+        calibration_.isOpen()) {
+        calibration_.close();
+        ++counters_.calibrationsAbandoned;
+    }
+    // Whatever was tracked before a calibration, or before the cameras went down, has moved.
+    const bool trackingResumes =
+        next == FirmwareState::Tracking || next == FirmwareState::Finishing;
+    if (trackingResumes &&
+        (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded))
+        tracker_->reset();
+    state_ = next;
+}
+
+void Firmware::handleButton(hal::Nanoseconds now) {
+    hal::ButtonEdge edge;
+    while (board_.button.nextEdge(edge))
+        button_.edge(edge);
+    for (ButtonEvent event = button_.poll(now); event != ButtonEvent::None;
+         event = button_.poll(now)) {
+        if (calibration_.finishing()) {
+            // The worker owns the session and the flash until it is done.
+            if (event == ButtonEvent::LongPress) {
+                deletePending_ = true;
+                note("long press: the models will be deleted once the calibration has finished");
+            } else {
+                note("button ignored: the last calibration is still finishing");
+            }
+            continue;
+        }
+        if (event == ButtonEvent::LongPress) {
+            deleteModels();
+            continue;
+        }
+        if (state_ == FirmwareState::Calibrating)
+            finishCalibration("the button");
+        else if (state_ == FirmwareState::Tracking)
+            startCalibration();
+        else
+            note("button ignored: the cameras are down");
+    }
+}
+
+void Firmware::startCalibration() {
+    calibration_.open(hal::toSeconds(board_.clock.now()));
+    changeState(FirmwareState::Calibrating);
+    ++counters_.calibrationsStarted;
+    note("calibration started");
+}
+
+void Firmware::finishCalibration(const char* why) {
+    char lasted[32];
+    std::snprintf(lasted, sizeof lasted, " after %.1f s", last_.time_s - calibration_.opened_s());
+    finishingEvent_ = std::string("calibration ended by ") + why + lasted;
+    const std::size_t objects = calibration_.learntObjects();
+    if (objects == 0) {
+        calibration_.close();
+        ++counters_.calibrationsEmpty;
+        changeState(FirmwareState::Tracking);
+        note(finishingEvent_ + ": no object learnt; models unchanged");
+        return;
+    }
+    // Completion and the save run beside the frame loop; the models from before are tracked
+    // until the new ones are in use.
+    calibration_.finish(copyOf(models_), store_);
+    changeState(FirmwareState::Finishing);
+    note(finishingEvent_ + ": finishing " + std::to_string(objects) + " objects");
+}
+
+void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
+    if (state_ == FirmwareState::Finishing)
+        changeState(FirmwareState::Tracking);
+    last_.completion_s = finished.took_s;
+    char took[48];
+    std::snprintf(took, sizeof took, ", completed in %.2f s", finished.took_s);
+    const std::string event = finishingEvent_ + took;
+    if (deletePending_) {
+        deletePending_ = false;
+        if (finished.learnt > 0)
+            ++(finished.saved ? counters_.calibrationsSaved : counters_.flashErrors);
+        deleteModels();
+        note(event + "; its models deleted by the long press meanwhile");
+        return;
+    }
+    if (finished.learnt == 0) {
+        ++counters_.calibrationsEmpty;
+        note(event + ": no object learnt; models unchanged");
+        return;
+    }
+    const MergedModels& merge = finished.merged;
+    counters_.fragmentsDropped += merge.fragments;
+    counters_.modelOverflow += merge.refused;
+    std::string text = event + ": " + std::to_string(merge.added) + " new, " +
+                       std::to_string(merge.updated) + " updated; " +
+                       std::to_string(merge.models.size()) + " models (";
+    for (std::size_t i = 0; i < merge.models.size(); ++i)
+        text += (i ? ", " : "") + std::to_string(merge.models[i].model.markers_model_mm.size());
+    text += " markers)";
+    if (merge.fragments > 0)
+        text += "; " + std::to_string(merge.fragments) + " fragment" +
+                (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
+    if (merge.refused > 0)
+        text += "; " + std::to_string(merge.refused) + " refused (max_models)";
+    if (finished.saved) {
+        ++counters_.calibrationsSaved;
+        text += ", saved to flash";
+    } else {
+        ++counters_.flashErrors;
+        text += ", NOT saved to flash (" + finished.saved.error().message + ")";
+    }
+    setModels(std::move(finished.merged.models));
+    note(std::move(text));
+}
+
+void Firmware::waitForFinishing() {
+    if (std::optional<FinishedCalibration> finished = calibration_.wait())
+        takeFinishedCalibration(std::move(*finished));
+}
+
+void Firmware::deleteModels() {
+    if (state_ == FirmwareState::Calibrating)
+        changeState(FirmwareState::Tracking);
+    const Status saved = store_.save({});
+    if (!saved)
+        ++counters_.flashErrors;
+    setModels({});
+    ++counters_.modelDeletions;
+    statusLed_.showOnce(LedPattern::Confirm, board_.clock.now());
+    note(saved ? "all models deleted (long press)"
+               : "models deleted, but flash failed: " + saved.error().message);
+}
+
+void Firmware::enterDegraded(const char* why) {
+    // Frames go back before the stream stops: a backend frees its buffers when it stops.
+    for (Queued queued; queue_.pop(queued);)
+        board_.cameras.release(queued.frame);
+    board_.cameras.stop();
+    cameras_.started = false;
+    changeState(FirmwareState::Degraded);
+    cameras_.nextRetryAt = board_.clock.now() + fromSeconds(config_.cameras.retry_s);
+    board_.ledRing.setContinuous(false);
+    note(std::string("degraded: ") + why + "; retrying every " +
+         std::to_string(config_.cameras.retry_s).substr(0, 4) + " s");
+}
+
+void Firmware::retryCameras(hal::Nanoseconds now) {
+    if (now < cameras_.nextRetryAt) {
+        board_.clock.sleepUntil(std::min(cameras_.nextRetryAt, now + board_.cameras.framePeriod()));
+        return;
+    }
+    ++counters_.cameraRestarts;
+    if (Status s = board_.cameras.start(); !s) {
+        cameras_.nextRetryAt = now + fromSeconds(config_.cameras.retry_s);
+        return;
+    }
+    cameras_.started = true;
+    strobe_.restart(board_.ledRing);
+    cameras_.lastFrameAt = board_.clock.now();
+    changeState(calibration_.finishing() ? FirmwareState::Finishing : FirmwareState::Tracking);
+    note("cameras restarted");
+}
+
+LedPattern Firmware::statePattern() const {
+    switch (state_) {
+    case FirmwareState::Degraded:
+        return LedPattern::FastBlink;
+    case FirmwareState::Calibrating:
+        return LedPattern::Blink;
+    case FirmwareState::Finishing:
+        return LedPattern::Finishing;
+    case FirmwareState::Tracking:
+        break;
+    }
+    const std::span<const TrackedBody> tracked = tracker_->bodies();
+    return std::any_of(tracked.begin(), tracked.end(),
+                       [](const TrackedBody& b) { return b.found(); })
+               ? LedPattern::On
+               : LedPattern::Heartbeat;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frame loop
+
+void Firmware::step() {
+    const hal::Nanoseconds now = board_.clock.now();
+    if (calibration_.finishing())
+        if (std::optional<FinishedCalibration> finished = calibration_.poll())
+            takeFinishedCalibration(std::move(*finished));
+    handleButton(now);
+    if (state_ == FirmwareState::Degraded) {
+        retryCameras(now);
+        statusLed_.update(statePattern(), board_.clock.now(), board_.statusLed);
+        return;
+    }
+    capture();
+    if (Queued next; queue_.pop(next)) {
+        process(next.frame, next.acquiredAt, next.acquiredHost_ns);
+        board_.cameras.release(next.frame);
+    }
+    outputs_.drainCanErrors(board_.can);
+    statusLed_.update(statePattern(), board_.clock.now(), board_.statusLed);
+}
+
+void Firmware::capture() {
+    const hal::Nanoseconds period = board_.cameras.framePeriod();
+    // Wait for a frame only when there is nothing to process: capture never waits on processing.
+    const hal::Nanoseconds wait = queue_.empty() ? period + period / 2 : 0;
+    hal::StereoFrame frame;
+    hal::AcquireStatus status = board_.cameras.acquire(frame, wait);
+    bool any = false;
+    while (status == hal::AcquireStatus::Frame) {
+        any = true;
+        const hal::Nanoseconds at = board_.clock.now();
+        cameras_.lastFrameAt = at;
+        counters_.strobePulsesRefused += strobe_.schedule(frame, period, board_.ledRing);
+        enqueue(Queued{frame, at, hostNanos()});
+        status = board_.cameras.acquire(frame, 0);
+    }
+    if (status == hal::AcquireStatus::Failed) {
+        ++counters_.cameraFailures;
+        enterDegraded("a camera failed");
+    } else if (status == hal::AcquireStatus::Stopped) {
+        enterDegraded("the cameras stopped");
+    } else if (!any && wait > 0) {
+        ++counters_.cameraTimeouts;
+        if (board_.clock.now() - cameras_.lastFrameAt > fromSeconds(config_.cameras.timeout_s))
+            enterDegraded("no frames from the cameras");
+    }
+}
+
+void Firmware::enqueue(const Queued& queued) {
+    // Drop the oldest: the newest exposure is the one worth processing. Its buffers go back to
+    // the cameras first.
+    if (Queued oldest; queue_.full() && queue_.pop(oldest)) {
+        board_.cameras.release(oldest.frame);
+        ++counters_.framesDroppedQueue;
+    }
+    if (!queue_.tryPush(queued)) // a queue of depth 0: the frame is dropped at once
+        board_.cameras.release(queued.frame);
+}
+
+void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                       std::int64_t acquiredHost_ns) {
+    const std::int64_t t0 = hostNanos();
+    for (std::size_t c = 0; c < 2; ++c)
+        if (frame.camera[c].width_px != markers_.width_px() ||
+            frame.camera[c].height_px != markers_.height_px() ||
+            frame.camera[c].stride_bytes < markers_.width_px() ||
+            frame.camera[c].pixels == nullptr) {
+            ++counters_.framesWrongSize;
+            return;
+        }
+    for (int c = 0; c < 2; ++c)
+        markers_.detectBlobs(c, frame.camera[static_cast<std::size_t>(c)].pixels,
+                             frame.camera[static_cast<std::size_t>(c)].stride_bytes);
+    const std::int64_t t1 = hostNanos();
+    markers_.matchStereo();
+    const std::int64_t t2 = hostNanos();
+
+    last_.number = frame.number;
+    last_.time_s = hal::toSeconds(frame.midExposure());
+    if (state_ == FirmwareState::Calibrating) {
+        const SessionStep step = calibration_.update(last_.time_s, markers_.points_rig_mm());
+        if (step == SessionStep::BufferFull)
+            ++counters_.sessionFramesRefused;
+        if (step != SessionStep::Continue)
+            finishCalibration(endReason(step));
+    } else {
+        tracker_->update(last_.time_s, markers_.points_rig_mm());
+        outputs_.updatePoses(last_.time_s, tracker_->bodies());
+    }
+    const std::int64_t t3 = hostNanos();
+    sendOutputs(frame, acquiredAt, acquiredHost_ns);
+    const std::int64_t t4 = hostNanos();
+
+    const std::int64_t stageEnds[kStageCount] = {t1, t2, t3, t4, t4};
+    const std::int64_t stageStarts[kStageCount] = {t0, t1, t2, t3, t0};
+    for (std::size_t s = 0; s < kStageCount; ++s)
+        stageTimes_[s].add(static_cast<double>(stageEnds[s] - stageStarts[s]) * 1e-3);
+    const hal::Nanoseconds budget = config_.health.frameBudget_ms > 0.0
+                                        ? fromSeconds(config_.health.frameBudget_ms * 1e-3)
+                                        : board_.cameras.framePeriod();
+    if (t4 - t0 > budget)
+        ++counters_.framesOverBudget;
+
+    const MarkerPipelineCounters refused = markers_.counters();
+    counters_.blobOverflow = refused.blobOverflow;
+    counters_.labelOverflow = refused.labelOverflow;
+    counters_.markerOverflow = refused.markerOverflow;
+    ++counters_.framesProcessed;
+}
+
+void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                           std::int64_t acquiredHost_ns) {
+    // Time on the board's clock until the frame was in hand, then the host's time spent on it:
+    // on the real board both are CLOCK_MONOTONIC; the simulated board's clock is virtual.
+    last_.latency_s = hal::toSeconds(acquiredAt - frame.midExposure()) +
+                      static_cast<double>(hostNanos() - acquiredHost_ns) * 1e-9;
+    if (state_ == FirmwareState::Calibrating)
+        outputs_.preview(last_.time_s, calibration_.online());
+    else
+        outputs_.clearPreview();
+    OutputFrame out;
+    out.number = frame.number;
+    out.midExposureUtc_ns = frame.midExposure() + board_.clock.utcOffset();
+    out.latency_s = last_.latency_s;
+    out.calibrated = static_cast<std::uint32_t>(models_.size());
+    out.bodies = bodies();
+    outputs_.send(out, board_.udp, board_.can);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Status view
+
+std::string Firmware::statusLine() const {
+    std::size_t found = 0;
+    for (const TrackedBody& b : bodies())
+        found += b.found() ? 1u : 0u;
+    char line[256];
+    const StageTime& frame = stageTime(Stage::Frame);
+    if (state_ == FirmwareState::Calibrating)
+        std::snprintf(line, sizeof line, "%s: frame %llu, %zu objects", stateName(state_),
+                      static_cast<unsigned long long>(last_.number), calibrationObjects());
+    else
+        std::snprintf(line, sizeof line, "%s: frame %llu, %zu of %zu bodies", stateName(state_),
+                      static_cast<unsigned long long>(last_.number), found, models_.size());
+    std::string text = line;
+    std::snprintf(line, sizeof line,
+                  "; frame %.2f ms (max %.2f), latency %.2f ms; dropped %llu, over budget %llu; "
+                  "udp %llu sent, can %llu sent",
+                  frame.mean_us * 1e-3, frame.max_us * 1e-3, last_.latency_s * 1e3,
+                  static_cast<unsigned long long>(counters_.framesDroppedQueue +
+                                                  board_.cameras.counters().droppedUnpaired +
+                                                  board_.cameras.counters().droppedNoBuffer),
+                  static_cast<unsigned long long>(counters_.framesOverBudget),
+                  static_cast<unsigned long long>(outputs_.counters().udpSent),
+                  static_cast<unsigned long long>(outputs_.counters().canSent));
+    return text + line;
+}
+
+std::string Firmware::statusReport() const {
+    std::string out = "state " + std::string(stateName(state_)) + ", " +
+                      std::to_string(models_.size()) + " models\n";
+    out += "flash: " + flashReport_ + "\n";
+    if (!lastEvent_.empty())
+        out += "last event: " + lastEvent_ + "\n";
+    char line[160];
+    out += "stage      last_us    mean_us     max_us\n";
+    for (std::size_t s = 0; s < kStageCount; ++s) {
+        const StageTime& t = stageTimes_[s];
+        std::snprintf(line, sizeof line, "%-8s %9.1f %10.1f %10.1f\n",
+                      stageName(static_cast<Stage>(s)), t.last_us, t.mean_us, t.max_us);
+        out += line;
+    }
+    const hal::CameraPairCounters cam = board_.cameras.counters();
+    auto row = [&](const char* name, std::uint64_t value) {
+        std::snprintf(line, sizeof line, "%-34s %llu\n", name,
+                      static_cast<unsigned long long>(value));
+        out += line;
+    };
+    const FirmwareCounters& c = counters_;
+    row("frames delivered by the cameras", cam.delivered);
+    row("frames processed", c.framesProcessed);
+    row("frames dropped: unpaired", cam.droppedUnpaired);
+    row("frames dropped: no free buffer", cam.droppedNoBuffer);
+    row("frames dropped: queue full", c.framesDroppedQueue);
+    row("frames dropped: wrong size", c.framesWrongSize);
+    row("frames over budget", c.framesOverBudget);
+    row("camera timeouts", c.cameraTimeouts);
+    row("camera failures", c.cameraFailures + cam.failures);
+    row("camera restarts", c.cameraRestarts);
+    row("strobe pulses refused", c.strobePulsesRefused + board_.ledRing.droppedPulses());
+    row("blobs refused (capacity)", c.blobOverflow);
+    row("blob labels refused (capacity)", c.labelOverflow);
+    row("markers refused (capacity)", c.markerOverflow);
+    const ModelTrackingCounters& t = tracker_->counters();
+    row("tracking: points refused", t.pointOverflow);
+    row("tracking: frames out of budget", t.budgetExhausted);
+    const OutputCounters& o = outputs_.counters();
+    row("udp sent", o.udpSent);
+    row("udp failed", o.udpFailed);
+    row("udp frames too large", o.udpTooLarge);
+    row("can sent", o.canSent);
+    row("can dropped (queue full)", o.canDropped);
+    row("can refused (bus-off, down)", o.canRefused);
+    row("can error events", o.canErrors);
+    row("can bodies beyond the layout", o.canBodiesBeyondLayout);
+    row("calibrations started", c.calibrationsStarted);
+    row("calibrations saved", c.calibrationsSaved);
+    row("calibrations with no object", c.calibrationsEmpty);
+    row("calibrations abandoned", c.calibrationsAbandoned);
+    row("calibration frames refused (buffer)", c.sessionFramesRefused);
+    std::snprintf(line, sizeof line, "%-34s %.2f\n", "last calibration completed in (s)",
+                  last_.completion_s);
+    out += line;
+    row("models refused (max_models)", c.modelOverflow);
+    row("learnt fragments dropped", c.fragmentsDropped);
+    row("model deletions", c.modelDeletions);
+    row("flash errors", c.flashErrors);
+    return out;
+}
+
+} // namespace edgetrack::app

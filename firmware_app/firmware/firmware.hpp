@@ -1,0 +1,236 @@
+// The board's firmware: the frame loop and state machine (tracking, calibrating, degraded).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/bounded_vector.hpp"
+#include "core/calibration_session.hpp"
+#include "core/marker_pipeline.hpp"
+#include "core/model_tracker.hpp"
+#include "core/ring_buffer.hpp"
+#include "firmware_app/firmware/button_input.hpp"
+#include "firmware_app/firmware/field_calibration.hpp"
+#include "firmware_app/firmware/firmware_config.hpp"
+#include "firmware_app/firmware/model_store.hpp"
+#include "firmware_app/firmware/pose_outputs.hpp"
+#include "firmware_app/firmware/status_pattern.hpp"
+#include "firmware_app/firmware/strobe_scheduler.hpp"
+#include "hal/hal.hpp"
+
+namespace edgetrack::app {
+
+enum class FirmwareState : std::uint8_t {
+    /// Models are tracked and poses sent (with no models, empty frames are sent).
+    Tracking,
+    /// A field calibration is learning objects; their growing models are sent as markers.
+    Calibrating,
+    /// A calibration has ended and its models are being completed and saved in a worker thread;
+    /// meanwhile the models from before are tracked and sent as in Tracking.
+    Finishing,
+    /// The cameras are gone: nothing is sent and the cameras are restarted every retry_s.
+    Degraded,
+};
+
+const char* stateName(FirmwareState state);
+
+/// \brief The stages of one frame whose run time the status view shows.
+enum class Stage : std::uint8_t { Blobs, Stereo, Track, Output, Frame };
+inline constexpr std::size_t kStageCount = 5;
+const char* stageName(Stage stage);
+
+/// \brief Run time of one stage (microseconds of the host's steady clock): last, mean, max.
+struct StageTime {
+    double last_us = 0.0;
+    double mean_us = 0.0;
+    double max_us = 0.0;
+    std::uint64_t count = 0;
+
+    void add(double us);
+};
+
+/// \brief Counters of the frame loop, for the status view (PX4's perf counters).
+struct FirmwareCounters {
+    std::uint64_t framesProcessed = 0;
+    /// Frames dropped from the full capture queue (the oldest goes) because processing lagged.
+    std::uint64_t framesDroppedQueue = 0;
+    /// Frames whose processing took longer than the frame budget.
+    std::uint64_t framesOverBudget = 0;
+    /// Frames of a size other than the rig's; dropped.
+    std::uint64_t framesWrongSize = 0;
+    std::uint64_t cameraTimeouts = 0;
+    std::uint64_t cameraFailures = 0;
+    std::uint64_t cameraRestarts = 0;
+    std::uint64_t strobePulsesRefused = 0;
+    /// Blob detection and stereo: what did not fit their capacities.
+    std::uint64_t blobOverflow = 0;
+    std::uint64_t labelOverflow = 0;
+    std::uint64_t markerOverflow = 0;
+    std::uint64_t calibrationsStarted = 0;
+    std::uint64_t calibrationsSaved = 0;
+    std::uint64_t calibrationsEmpty = 0;
+    std::uint64_t calibrationsAbandoned = 0;
+    /// Calibration frames the session buffer had no room for (the session then ends).
+    std::uint64_t sessionFramesRefused = 0;
+    /// Learnt models that did not fit max_models.
+    std::uint64_t modelOverflow = 0;
+    /// Learnt objects whose layout is part of a body with more than twice their markers.
+    std::uint64_t fragmentsDropped = 0;
+    std::uint64_t modelDeletions = 0;
+    std::uint64_t flashErrors = 0;
+};
+
+/**
+ * \brief The firmware on one board: owns every stage's storage and runs the frame loop.
+ *
+ * The constructor allocates everything a frame needs from the configuration (buffers, blob and
+ * marker capacities, calibration session and its frame buffer, queues); step() then allocates
+ * nothing while tracking or calibrating. Loading and saving models (start-up, a long press)
+ * allocates: those are state changes, not frames. A calibration's end (completion, merge, save)
+ * runs in a CalibrationFinisher's worker thread while step() goes on tracking.
+ *
+ * One step() handles the button, waits for the next paired frame (at most a frame period and a
+ * bit), drains any other completed frames into the capture queue (dropping the oldest when it is
+ * full, so capture never waits for processing), schedules the LED strobe for the coming
+ * exposures, processes the oldest queued frame (blobs, stereo, tracking or calibration, outputs)
+ * and updates the status LED.
+ */
+class Firmware {
+public:
+    /// \param rig the stereo calibration of \a board's cameras.
+    Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig);
+    /// Waits for a finishing calibration's worker, which uses the session and the model store.
+    ~Firmware();
+    Firmware(const Firmware&) = delete;
+    Firmware& operator=(const Firmware&) = delete;
+
+    /// \return false when the configuration cannot run (see error()).
+    bool isValid() const { return error_.empty(); }
+    const std::string& error() const { return error_; }
+
+    /// \brief Load the models from flash (with none when both slots are bad; see flashReport())
+    /// and start the cameras (degraded, and retried, when they do not start).
+    void start();
+    /// \brief One turn of the loop (see the class description).
+    void step();
+    void stop();
+
+    /// \brief Replace the model set (e.g. from `--models DIR`) and keep it on flash.
+    Status replaceModels(std::vector<NamedModel> models);
+
+    FirmwareState state() const { return state_; }
+    /// \return true once cameras, flash and outputs are up: when systemd may be told READY=1.
+    bool ready() const { return cameras_.started && state_ != FirmwareState::Degraded; }
+    std::span<const NamedModel> models() const { return models_; }
+    /// \return the bodies after the last processed frame (empty while calibrating).
+    std::span<const TrackedBody> bodies() const;
+    /// \return how many objects the running calibration holds (0 when not calibrating).
+    std::size_t calibrationObjects() const;
+    /// \brief Wait until a finishing calibration's models are in use (tests; shutting down).
+    void waitForFinishing();
+    const FirmwareCounters& counters() const { return counters_; }
+    const StageTime& stageTime(Stage stage) const {
+        return stageTimes_[static_cast<std::size_t>(stage)];
+    }
+    /// \return frame number of the last processed frame.
+    std::uint64_t lastFrame() const { return last_.number; }
+    /// \return mid-exposure of the last processed frame (s, the board's clock).
+    double lastFrameTime_s() const { return last_.time_s; }
+    /// \return the marker front end: the last processed frame's blobs and 3D markers.
+    const MarkerPipeline& markerPipeline() const { return markers_; }
+    /// \return latency of the last processed frame, mid-exposure to send (s).
+    double lastLatency_s() const { return last_.latency_s; }
+    const OutputCounters& outputCounters() const { return outputs_.counters(); }
+    /// \return what start-up found on flash, and the last event worth telling (one line each).
+    const std::string& flashReport() const { return flashReport_; }
+    const std::string& lastEvent() const { return lastEvent_; }
+
+    /// \brief One status line for the console: state, frame, bodies, stage times, drops.
+    std::string statusLine() const;
+    /// \brief Every counter and stage time, one per line (`edgetrack status`).
+    std::string statusReport() const;
+
+private:
+    /// The one place the state changes; a calibration left for any state but Finishing is
+    /// counted as abandoned.
+    void changeState(FirmwareState next);
+    void handleButton(hal::Nanoseconds now);
+    void startCalibration();
+    void finishCalibration(const char* why);
+    void takeFinishedCalibration(FinishedCalibration finished);
+    /// Tracking or Finishing: the known models are tracked and sent.
+    bool tracksModels() const {
+        return state_ == FirmwareState::Tracking || state_ == FirmwareState::Finishing;
+    }
+    void deleteModels();
+    void setModels(std::vector<NamedModel> models);
+
+    struct Queued;
+    void capture();
+    void enqueue(const Queued& queued);
+    void process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                 std::int64_t acquiredHost_ns);
+    void sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
+                     std::int64_t acquiredHost_ns);
+    void enterDegraded(const char* why);
+    void retryCameras(hal::Nanoseconds now);
+    LedPattern statePattern() const;
+    void note(std::string event);
+
+    // Every member below is one job of the board (a pipeline stage, a device, a piece of state):
+    // about twenty, each a class with its own storage.
+    FirmwareConfig config_;
+    hal::Board& board_;
+    std::string error_;
+    FirmwareState state_ = FirmwareState::Tracking;
+    ButtonInput button_;
+
+    // Frames: the capture queue (taken from the cameras, not yet processed, oldest first), the
+    // strobe, the cameras' health, the marker front end.
+    struct Queued {
+        hal::StereoFrame frame;
+        hal::Nanoseconds acquiredAt = 0;
+        std::int64_t acquiredHost_ns = 0;
+    };
+    RingBuffer<Queued> queue_{0};
+    StrobeScheduler strobe_;
+    struct CameraHealth {
+        bool started = false;
+        hal::Nanoseconds lastFrameAt = 0;
+        hal::Nanoseconds nextRetryAt = 0;
+    } cameras_;
+    MarkerPipeline markers_;
+
+    // Models: the set in use, on flash, tracked; a field calibration.
+    std::vector<NamedModel> models_;
+    ModelStore store_;
+    std::optional<ModelTracker> tracker_;
+    FieldCalibration calibration_;
+    /// Finishing: "calibration ended by ... after ... s", and a long press waiting for the end.
+    std::string finishingEvent_;
+    bool deletePending_ = false;
+
+    PoseOutputs outputs_;
+    StatusLedDriver statusLed_;
+
+    // Status view.
+    struct LastFrame {
+        std::uint64_t number = 0;
+        /// Mid-exposure (s, the board's clock).
+        double time_s = 0.0;
+        /// Mid-exposure to sending (s).
+        double latency_s = 0.0;
+        /// How long the last calibration's completion took (s).
+        double completion_s = 0.0;
+    } last_;
+    FirmwareCounters counters_{};
+    std::array<StageTime, kStageCount> stageTimes_{};
+    std::string flashReport_;
+    std::string lastEvent_;
+};
+
+} // namespace edgetrack::app

@@ -1,0 +1,189 @@
+// Strict reader and writer of the recordings' numeric CSV files (INTERFACES §1).
+#include "firmware_app/formats/csv.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <system_error>
+
+namespace edgetrack::recording {
+
+namespace {
+
+std::string_view trim(std::string_view s) {
+    while (!s.empty() && (s.front() == ' ' || s.front() == '\t'))
+        s.remove_prefix(1);
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+        s.remove_suffix(1);
+    return s;
+}
+
+Error lineError(std::string_view name, std::size_t line, const std::string& what) {
+    return Error{std::string(name) + ":" + std::to_string(line) + ": " + what};
+}
+
+std::string quoted(std::string_view field) {
+    constexpr std::size_t kShown = 40;
+    std::string s = "\"" + std::string(field.substr(0, kShown));
+    if (field.size() > kShown)
+        s += "...";
+    return s + "\"";
+}
+
+std::string expectedHeader(std::span<const CsvColumn> columns) {
+    std::string header;
+    for (const CsvColumn& c : columns) {
+        if (!header.empty())
+            header += c.optional ? "[," : ",";
+        header += c.name;
+        if (c.optional)
+            header += "]";
+    }
+    return header;
+}
+
+// Splits a line at commas into at most kMaxCsvColumns + 1 fields (one more reveals "too many").
+std::size_t splitFields(std::string_view line,
+                        std::array<std::string_view, kMaxCsvColumns + 1>& out) {
+    std::size_t count = 0;
+    while (true) {
+        const std::size_t comma = line.find(',');
+        out[count++] = trim(line.substr(0, comma));
+        if (comma == std::string_view::npos || count == out.size())
+            return count;
+        line.remove_prefix(comma + 1);
+    }
+}
+
+} // namespace
+
+Result<CsvTable> parseCsv(std::string_view text, std::string_view name,
+                          std::span<const CsvColumn> columns) {
+    std::size_t required = 0;
+    while (required < columns.size() && !columns[required].optional)
+        ++required;
+
+    CsvTable table;
+    std::size_t lineNumber = 0;
+    bool headerSeen = false;
+    std::array<std::string_view, kMaxCsvColumns + 1> fields;
+
+    while (!text.empty()) {
+        const std::size_t newline = text.find('\n');
+        std::string_view line = text.substr(0, newline);
+        text.remove_prefix(newline == std::string_view::npos ? text.size() : newline + 1);
+        ++lineNumber;
+        if (!line.empty() && line.back() == '\r')
+            line.remove_suffix(1);
+
+        if (!headerSeen) {
+            headerSeen = true;
+            const std::size_t n = splitFields(line, fields);
+            bool matches = n >= required && n <= columns.size();
+            for (std::size_t i = 0; matches && i < n; ++i)
+                matches = fields[i] == columns[i].name;
+            if (!matches)
+                return lineError(name, lineNumber,
+                                 "bad header " + quoted(line) + ", expected \"" +
+                                     expectedHeader(columns) + "\"");
+            table.columnCount = n;
+            continue;
+        }
+        if (trim(line).empty()) {
+            if (text.empty())
+                break; // a final newline, or a blank last line, ends the file
+            return lineError(name, lineNumber, "empty line");
+        }
+
+        const std::size_t n = splitFields(line, fields);
+        if (n != table.columnCount)
+            return lineError(name, lineNumber,
+                             "expected " + std::to_string(table.columnCount) + " fields, found " +
+                                 (n > columns.size() ? "more" : std::to_string(n)));
+        CsvRow row;
+        row.line = lineNumber;
+        row.fieldCount = n;
+        for (std::size_t i = 0; i < n; ++i) {
+            const std::string_view field = fields[i];
+            const char* first = field.data();
+            const char* last = field.data() + field.size();
+            const std::string column(columns[i].name);
+            if (columns[i].type == ColumnType::Integer) {
+                std::int64_t value = 0;
+                const auto [end, ec] = std::from_chars(first, last, value);
+                if (field.empty() || ec != std::errc{} || end != last)
+                    return lineError(name, lineNumber,
+                                     "field '" + column + "' is not an integer: " + quoted(field));
+                row.values[i] = static_cast<double>(value);
+            } else {
+                double value = 0.0;
+                const auto [end, ec] = std::from_chars(first, last, value);
+                if (field.empty() || ec != std::errc{} || end != last)
+                    return lineError(name, lineNumber,
+                                     "field '" + column + "' is not a number: " + quoted(field));
+                if (!std::isfinite(value))
+                    return lineError(name, lineNumber,
+                                     "field '" + column + "' is " + quoted(field) +
+                                         ": NaN and infinity are not allowed");
+                row.values[i] = value;
+            }
+        }
+        table.rows.push_back(row);
+    }
+    if (!headerSeen)
+        return lineError(name, 1, "missing header, expected \"" + expectedHeader(columns) + "\"");
+    return table;
+}
+
+Result<std::string> readTextFile(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in)
+        return Error{path.string() + ": cannot open for reading"};
+    std::ostringstream content;
+    content << in.rdbuf();
+    if (in.bad())
+        return Error{path.string() + ": read error"};
+    return content.str();
+}
+
+Result<CsvTable> readCsvFile(const std::filesystem::path& path,
+                             std::span<const CsvColumn> columns) {
+    Result<std::string> text = readTextFile(path);
+    if (!text)
+        return text.error();
+    return parseCsv(*text, path.string(), columns);
+}
+
+Status writeTextFileAtomically(const std::filesystem::path& path, std::string_view text) {
+    std::filesystem::path temporary = path;
+    temporary += ".tmp";
+    {
+        std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+        if (!out)
+            return Error{temporary.string() + ": cannot open for writing"};
+        out.write(text.data(), static_cast<std::streamsize>(text.size()));
+        out.flush();
+        if (!out)
+            return Error{temporary.string() + ": write error"};
+    }
+    std::error_code ec;
+    std::filesystem::rename(temporary, path, ec);
+    if (ec)
+        return Error{path.string() + ": cannot replace: " + ec.message()};
+    return Ok{};
+}
+
+void appendNumber(std::string& out, double value) {
+    std::array<char, 32> buffer;
+    const auto result = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+    out.append(buffer.data(), result.ptr);
+}
+
+void appendNumber(std::string& out, std::int64_t value) {
+    std::array<char, 24> buffer;
+    const auto result = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+    out.append(buffer.data(), result.ptr);
+}
+
+} // namespace edgetrack::recording
