@@ -5,167 +5,40 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
-#include <limits>
 #include <optional>
-#include <set>
 #include <sstream>
 
 #include <toml++/toml.h>
 
 #include "core/marker_set.hpp"
 #include "firmware_app/formats/toml_document.hpp"
+#include "firmware_app/formats/toml_table.hpp"
 
 namespace edgetrack::app {
 
 namespace {
 
-/// \brief Reads one table's keys into settings; remembers the first error and every key it knew.
-class Section {
-public:
-    Section(std::string_view file, std::string name, const toml::table* table,
-            std::optional<Error>& error)
-        : file_(file)
-        , name_(std::move(name))
-        , table_(table)
-        , error_(error) {}
+using Section = recording::TomlTableReader;
 
-    void real(const char* key, double& value, double min, double max = kNoLimit,
-              bool minExclusive = false) {
-        const toml::node* node = find(key);
-        if (node == nullptr)
-            return;
-        std::optional<double> read;
-        if (node->is_floating_point())
-            read = node->value<double>();
-        else if (node->is_integer())
-            read = static_cast<double>(*node->value<std::int64_t>());
-        if (!read)
-            return fail(*node, key, "expected a number");
-        if (!std::isfinite(*read))
-            return fail(*node, key, "NaN and infinity are not allowed");
-        if (minExclusive ? *read <= min : *read < min)
-            return fail(*node, key,
-                        std::string(minExclusive ? "must be > " : "must be >= ") + show(min) +
-                            " (got " + show(*read) + ")");
-        if (*read > max)
-            return fail(*node, key, "must be <= " + show(max) + " (got " + show(*read) + ")");
-        value = *read;
+/// \brief "HOST:PORT" strings, each a destination.
+void readEndpoints(Section& s, const char* key, std::vector<hal::UdpEndpoint>& value) {
+    const toml::node* node = s.find(key);
+    if (node == nullptr)
+        return;
+    const toml::array* array = node->as_array();
+    if (array == nullptr)
+        return s.fail(*node, key, "expected an array of \"HOST:PORT\" strings");
+    std::vector<hal::UdpEndpoint> read;
+    for (const toml::node& entry : *array) {
+        if (!entry.is_string())
+            return s.fail(entry, key, "expected \"HOST:PORT\" strings");
+        Result<hal::UdpEndpoint> endpoint = parseEndpoint(*entry.value<std::string>());
+        if (!endpoint)
+            return s.fail(entry, key, endpoint.error().message);
+        read.push_back(*endpoint);
     }
-
-    template <typename Integer>
-    void integer(const char* key, Integer& value, std::int64_t min, std::int64_t max) {
-        const toml::node* node = find(key);
-        if (node == nullptr)
-            return;
-        if (!node->is_integer())
-            return fail(*node, key, "expected an integer");
-        const std::int64_t read = *node->value<std::int64_t>();
-        if (read < min || read > max)
-            return fail(*node, key,
-                        "must be between " + std::to_string(min) + " and " + std::to_string(max) +
-                            " (got " + std::to_string(read) + ")");
-        value = static_cast<Integer>(read);
-    }
-
-    void flag(const char* key, bool& value) {
-        const toml::node* node = find(key);
-        if (node == nullptr)
-            return;
-        if (!node->is_boolean())
-            return fail(*node, key, "expected true or false");
-        value = *node->value<bool>();
-    }
-
-    void text(const char* key, std::string& value, bool mayBeEmpty = false) {
-        const toml::node* node = find(key);
-        if (node == nullptr)
-            return;
-        if (!node->is_string())
-            return fail(*node, key, "expected a string");
-        std::string read = *node->value<std::string>();
-        if (read.empty() && !mayBeEmpty)
-            return fail(*node, key, "must not be empty");
-        value = std::move(read);
-    }
-
-    void path(const char* key, std::filesystem::path& value) {
-        std::string read = value.string();
-        text(key, read, true);
-        value = read;
-    }
-
-    void endpoints(const char* key, std::vector<hal::UdpEndpoint>& value) {
-        const toml::node* node = find(key);
-        if (node == nullptr)
-            return;
-        const toml::array* array = node->as_array();
-        if (array == nullptr)
-            return fail(*node, key, "expected an array of \"HOST:PORT\" strings");
-        std::vector<hal::UdpEndpoint> read;
-        for (const toml::node& entry : *array) {
-            if (!entry.is_string())
-                return fail(entry, key, "expected \"HOST:PORT\" strings");
-            Result<hal::UdpEndpoint> endpoint = parseEndpoint(*entry.value<std::string>());
-            if (!endpoint)
-                return fail(entry, key, endpoint.error().message);
-            read.push_back(*endpoint);
-        }
-        value = std::move(read);
-    }
-
-    /// \brief A check across keys, reported at the table.
-    void require(bool condition, const char* key, const std::string& what) {
-        if (!condition && !error_) {
-            const toml::node* node = table_ != nullptr ? table_->get(key) : nullptr;
-            if (node != nullptr)
-                fail(*node, key, what);
-            else
-                error_ = Error{std::string(file_) + ": [" + name_ + "] " + key + ": " + what};
-        }
-    }
-
-    /// \brief Report the first key of the table that no call above asked for.
-    void refuseUnknownKeys() {
-        if (table_ == nullptr || error_)
-            return;
-        for (const auto& [key, node] : *table_)
-            if (!known_.contains(std::string(key.str())) && !subtables_.contains(key.str()))
-                return fail(node, std::string(key.str()).c_str(), "unknown key");
-    }
-
-    /// \brief A key that holds a sub-table read by another Section.
-    void allowTable(std::string_view key) { subtables_.insert(std::string(key)); }
-
-    static constexpr double kNoLimit = std::numeric_limits<double>::max();
-
-private:
-    const toml::node* find(const char* key) {
-        known_.insert(key);
-        if (error_ || table_ == nullptr)
-            return nullptr;
-        return table_->get(key);
-    }
-
-    void fail(const toml::node& node, const char* key, const std::string& what) {
-        if (error_)
-            return;
-        error_ = Error{std::string(file_) + ":" + std::to_string(node.source().begin.line) + ": [" +
-                       name_ + "] " + key + ": " + what};
-    }
-
-    static std::string show(double v) {
-        std::ostringstream out;
-        out << v;
-        return out.str();
-    }
-
-    std::string_view file_;
-    std::string name_;
-    const toml::table* table_;
-    std::optional<Error>& error_;
-    std::set<std::string, std::less<>> known_;
-    std::set<std::string, std::less<>> subtables_;
-};
+    value = std::move(read);
+}
 
 constexpr std::int64_t kMaxCount = 1 << 20;
 
@@ -305,7 +178,7 @@ void readFlash(Section& s, FlashSettings& f) {
 
 void readUdp(Section& s, UdpSettings& u) {
     s.flag("enabled", u.enabled);
-    s.endpoints("destinations", u.destinations);
+    readEndpoints(s, "destinations", u.destinations);
     s.flag("latency_line", u.latencyLine);
     s.require(!u.enabled || !u.destinations.empty(), "destinations",
               "must name at least one destination while enabled");
@@ -399,7 +272,7 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
     };
     auto read = [&](const toml::table& parent, std::string_view key, std::string label,
                     auto&& reader) {
-        Section section(name, std::move(label), table(parent, key), error);
+        Section section(name, "[" + label + "] ", table(parent, key), error);
         reader(section);
         section.refuseUnknownKeys();
     };
@@ -421,7 +294,7 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
     if (const toml::table* output = table(root, "output")) {
         read(*output, "udp", "output.udp", [&](Section& s) { readUdp(s, config.udp); });
         read(*output, "can", "output.can", [&](Section& s) { readCan(s, config.can); });
-        Section outputSection(name, "output", output, error);
+        Section outputSection(name, "[output] ", output, error);
         outputSection.allowTable("udp");
         outputSection.allowTable("can");
         outputSection.refuseUnknownKeys();

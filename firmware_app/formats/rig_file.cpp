@@ -10,6 +10,7 @@
 #include "firmware_app/formats/csv.hpp"
 #include "firmware_app/formats/recording.hpp"
 #include "firmware_app/formats/toml_document.hpp"
+#include "firmware_app/formats/toml_table.hpp"
 
 namespace edgetrack::recording {
 
@@ -17,154 +18,65 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class RigParser {
-public:
-    RigParser(std::string_view name)
-        : name_(name) {}
-
-    Error at(const toml::node& node, const std::string& key, const std::string& what) const {
-        return Error{name_ + ":" + std::to_string(node.source().begin.line) + ": " + key + ": " +
-                     what};
-    }
-    Error atFile(const std::string& what) const { return Error{name_ + ": " + what}; }
-
-    Result<double> number(const toml::table& table, const toml::node& where,
-                          const std::string& prefix, const char* key) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        std::optional<double> value;
-        if (node->is_floating_point())
-            value = node->value<double>();
-        else if (node->is_integer())
-            value = static_cast<double>(*node->value<std::int64_t>());
-        if (!value)
-            return at(*node, prefix + key, "expected a number");
-        if (!std::isfinite(*value))
-            return at(*node, prefix + key, "NaN and infinity are not allowed");
-        return *value;
-    }
-
-    Result<int> positiveInteger(const toml::table& table, const toml::node& where,
-                                const std::string& prefix, const char* key) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        if (!node->is_integer())
-            return at(*node, prefix + key, "expected an integer");
-        const std::int64_t value = *node->value<std::int64_t>();
-        if (value <= 0 || value > 65535)
-            return at(*node, prefix + key, "must be between 1 and 65535");
-        return static_cast<int>(value);
-    }
-
-    template <std::size_t N>
-    Status numbers(const toml::table& table, const toml::node& where, const std::string& prefix,
-                   const char* key, std::array<double, N>& out) const {
-        const toml::node* node = table.get(key);
-        if (node == nullptr)
-            return at(where, prefix + key, "missing");
-        const toml::array* array = node->as_array();
-        if (array == nullptr || array->size() != N)
-            return at(*node, prefix + key,
-                      "expected an array of " + std::to_string(N) + " numbers");
-        for (std::size_t i = 0; i < N; ++i) {
-            const toml::node* entry = array->get(i);
-            if (entry == nullptr)
-                return at(*node, prefix + key, "element " + std::to_string(i) + " is missing");
-            const toml::node& element = *entry;
-            std::optional<double> value;
-            if (element.is_floating_point())
-                value = element.value<double>();
-            else if (element.is_integer())
-                value = static_cast<double>(*element.value<std::int64_t>());
-            if (!value)
-                return at(element, prefix + key,
-                          "element " + std::to_string(i) + " is not a number");
-            if (!std::isfinite(*value))
-                return at(element, prefix + key, "NaN and infinity are not allowed");
-            out[i] = *value;
-        }
-        return Ok{};
-    }
-
-    Result<CameraModel> camera(const toml::table& table, std::size_t index) const {
-        const std::string prefix = "camera[" + std::to_string(index) + "].";
-        CameraIntrinsics in;
-        CameraExtrinsics ex;
-
-        Result<int> width = positiveInteger(table, table, prefix, "width");
-        if (!width)
-            return width.error();
-        Result<int> height = positiveInteger(table, table, prefix, "height");
-        if (!height)
-            return height.error();
-        in.width_px = *width;
-        in.height_px = *height;
-
-        std::array<double*, 4> targets{&in.fx_px, &in.fy_px, &in.cx_px, &in.cy_px};
-        std::array<const char*, 4> keys{"fx", "fy", "cx", "cy"};
-        for (std::size_t i = 0; i < keys.size(); ++i) {
-            Result<double> v = number(table, table, prefix, keys[i]);
-            if (!v)
-                return v.error();
-            *targets[i] = *v;
-        }
-        if (in.fx_px <= 0.0)
-            return at(*table.get("fx"), prefix + "fx", "must be positive");
-        if (in.fy_px <= 0.0)
-            return at(*table.get("fy"), prefix + "fy", "must be positive");
-
-        if (Status s = numbers(table, table, prefix, "distortion", in.distortion); !s)
-            return s.error();
-        std::array<double, 9> r{};
-        if (Status s = numbers(table, table, prefix, "rotation", r); !s)
-            return s.error();
-        std::array<double, 3> t{};
-        if (Status s = numbers(table, table, prefix, "translation", t); !s)
-            return s.error();
-        ex.rotation_cam_from_rig << r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8];
-        ex.translation_cam_from_rig_mm = {t[0], t[1], t[2]};
-
-        CameraModel model(in, ex);
-        if (!model.isValid())
-            return at(*table.get("rotation"), prefix + "rotation",
-                      "not a proper rotation matrix (row-major, orthonormal, det +1)");
-        return model;
-    }
-
-private:
-    std::string name_;
-};
+/// \brief Camera \a index of rig.toml: every key required, extra keys ignored (INTERFACES §2).
+Result<CameraModel> readCamera(std::string_view name, const toml::table& table, std::size_t index) {
+    std::optional<Error> error;
+    TomlTableReader keys(name, "camera[" + std::to_string(index) + "].", &table, error,
+                         TomlTableReader::Keys::Required);
+    CameraIntrinsics in;
+    CameraExtrinsics ex;
+    keys.integer("width", in.width_px, 1, 65535);
+    keys.integer("height", in.height_px, 1, 65535);
+    keys.real("fx", in.fx_px);
+    keys.real("fy", in.fy_px);
+    keys.real("cx", in.cx_px);
+    keys.real("cy", in.cy_px);
+    keys.require(in.fx_px > 0.0, "fx", "must be positive");
+    keys.require(in.fy_px > 0.0, "fy", "must be positive");
+    keys.numbers("distortion", in.distortion);
+    std::array<double, 9> r{};
+    keys.numbers("rotation", r);
+    std::array<double, 3> t{};
+    keys.numbers("translation", t);
+    if (error)
+        return *error;
+    ex.rotation_cam_from_rig << r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8];
+    ex.translation_cam_from_rig_mm = {t[0], t[1], t[2]};
+    CameraModel model(in, ex);
+    keys.require(model.isValid(), "rotation",
+                 "not a proper rotation matrix (row-major, orthonormal, det +1)");
+    if (error)
+        return *error;
+    return model;
+}
 
 } // namespace
 
 Result<StereoRig> parseRig(std::string_view text, std::string_view name) {
-    const RigParser parser(name);
+    auto atFile = [&](const std::string& what) { return Error{std::string(name) + ": " + what}; };
     const Result<toml::table> parsed = parseTomlDocument(text, name);
     if (!parsed)
         return parsed.error();
     const toml::table& root = *parsed;
     const toml::array* cameras = root["camera"].as_array();
     if (cameras == nullptr)
-        return parser.atFile("missing [[camera]] tables");
+        return atFile("missing [[camera]] tables");
     if (cameras->size() != 2)
-        return parser.atFile("expected 2 [[camera]] tables, found " +
-                             std::to_string(cameras->size()));
+        return atFile("expected 2 [[camera]] tables, found " + std::to_string(cameras->size()));
     std::array<CameraModel, 2> models;
     for (std::size_t i = 0; i < 2; ++i) {
         const toml::node* entry = cameras->get(i);
         const toml::table* table = entry != nullptr ? entry->as_table() : nullptr;
         if (table == nullptr)
-            return parser.atFile("camera[" + std::to_string(i) + "] is not a table");
-        Result<CameraModel> model = parser.camera(*table, i);
+            return atFile("camera[" + std::to_string(i) + "] is not a table");
+        Result<CameraModel> model = readCamera(name, *table, i);
         if (!model)
             return model.error();
         models[i] = *model;
     }
     StereoRig rig(models[0], models[1]);
     if (!rig.isValid())
-        return parser.atFile("the two cameras share one optical centre or look along the baseline");
+        return atFile("the two cameras share one optical centre or look along the baseline");
     return rig;
 }
 
