@@ -13,28 +13,14 @@
 #include "firmware_app/formats/recording.hpp"
 #include "firmware_app/tools/calibrate_command.hpp"
 #include "firmware_app/tools/reconstruct_command.hpp"
-#include "hal/sim/scene.hpp"
-#include "hal/sim/sim_board.hpp"
+#include "tests/functional/firmware_on_sim_board.hpp"
 #include "tests/support/temp_dir.hpp"
 
 namespace edgetrack::app {
 namespace {
 
 namespace fs = std::filesystem;
-constexpr hal::Nanoseconds kMs = hal::kNanosecondsPerMillisecond;
 const fs::path kDeployed = fs::path(EDGETRACK_SOURCE_DIR) / "deploy" / "edgetrack.toml";
-
-#ifdef EDGETRACK_SLOW_TARGET
-constexpr auto kFinishingTimeout = std::chrono::seconds(900);
-#else
-constexpr auto kFinishingTimeout = std::chrono::seconds(120);
-#endif
-
-std::unique_ptr<sim::SimBoard> makeBoard(const char* scene, std::uint64_t seed) {
-    std::optional<sim::Scene> s = sim::makeScene(scene, seed);
-    EXPECT_TRUE(s.has_value());
-    return std::make_unique<sim::SimBoard>(std::move(*s), seed);
-}
 
 std::string readText(const fs::path& path) {
     std::ifstream in(path);
@@ -208,8 +194,7 @@ void expectOfflineCalibrationAsOnTheBoard(const fs::path& configPath) {
     }
     const auto finishing = std::chrono::steady_clock::now();
     while (firmware.state() == FirmwareState::Finishing) {
-        firmware.step();
-        std::this_thread::sleep_for(std::chrono::microseconds(500));
+        stepBesideTheWorker(firmware);
         ASSERT_LT(std::chrono::steady_clock::now() - finishing, kFinishingTimeout);
     }
     ASSERT_EQ(firmware.models().size(), 2u) << firmware.lastEvent();
