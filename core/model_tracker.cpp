@@ -45,14 +45,14 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     std::vector<std::uint32_t> binCounts;
     for (const MarkerModel& m : models) {
         ModelSlot slot;
-        slot.firstMarker = markers_model_mm_.size();
+        slot.firstMarker = models_.markers_model_mm.size();
         slot.markerCount = m.markers_model_mm.size();
         slot.sMin = std::max<std::uint32_t>(m.sMin, 3);
-        maxModelMarkers_ = std::max(maxModelMarkers_, slot.markerCount);
+        models_.maxMarkers = std::max(models_.maxMarkers, slot.markerCount);
         Vec3 centroid = Vec3::Zero();
         for (const Vec3& p : m.markers_model_mm) {
-            markers_model_mm_.push_back(p);
-            adjacency_.emplace_back();
+            models_.markers_model_mm.push_back(p);
+            models_.adjacency.emplace_back();
             centroid += p;
         }
         if (slot.markerCount > 0)
@@ -63,20 +63,20 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
 
         double longest = 0.0;
         for (const ModelEdge& e : m.edges) {
-            adjacency_[slot.firstMarker + e.from].insert(e.to);
-            adjacency_[slot.firstMarker + e.to].insert(e.from);
+            models_.adjacency[slot.firstMarker + e.from].insert(e.to);
+            models_.adjacency[slot.firstMarker + e.to].insert(e.from);
             longest = std::max(longest, e.distance_mm);
         }
-        slot.firstDistance = modelDistance_mm_.size();
+        slot.firstDistance = models_.distance_mm.size();
         for (const Vec3& a : m.markers_model_mm)
             for (const Vec3& b : m.markers_model_mm)
-                modelDistance_mm_.push_back(static_cast<float>((a - b).norm()));
+                models_.distance_mm.push_back(static_cast<float>((a - b).norm()));
         slot.firstBin = binCounts.size();
         slot.binCount = static_cast<std::size_t>(longest / binWidth) + 2;
         binCounts.resize(slot.firstBin + slot.binCount, 0);
         for (const ModelEdge& e : m.edges)
             ++binCounts[slot.firstBin + static_cast<std::size_t>(e.distance_mm / binWidth)];
-        slots_.push_back(slot);
+        models_.slots.push_back(slot);
     }
 
     // Copies of one layout are found from the models themselves: model files do not say it.
@@ -87,19 +87,19 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
         for (std::size_t j = i + 1; j < models.size(); ++j)
             if (sameShape(models[i], models[j], copies))
                 copiesOf.unite(i, j);
-    for (std::size_t i = 0; i < slots_.size(); ++i)
-        slots_[i].shapeGroup = copiesOf.find(i);
+    for (std::size_t i = 0; i < models_.slots.size(); ++i)
+        models_.slots[i].shapeGroup = copiesOf.find(i);
 
-    binStart_.assign(binCounts.size() + 1, 0);
+    table_.binStart.assign(binCounts.size() + 1, 0);
     for (std::size_t b = 0; b < binCounts.size(); ++b)
-        binStart_[b + 1] = binStart_[b] + binCounts[b];
-    entries_.resize(binStart_.back());
-    std::vector<std::uint32_t> fill(binStart_.begin(), binStart_.end() - 1);
+        table_.binStart[b + 1] = table_.binStart[b] + binCounts[b];
+    table_.entries.resize(table_.binStart.back());
+    std::vector<std::uint32_t> fill(table_.binStart.begin(), table_.binStart.end() - 1);
     for (std::size_t i = 0; i < models.size(); ++i)
         for (const ModelEdge& e : models[i].edges) {
             const std::size_t bin =
-                slots_[i].firstBin + static_cast<std::size_t>(e.distance_mm / binWidth);
-            entries_[fill[bin]++] = HashEntry{e.from, e.to, e.distance_mm};
+                models_.slots[i].firstBin + static_cast<std::size_t>(e.distance_mm / binWidth);
+            table_.entries[fill[bin]++] = HashEntry{e.from, e.to, e.distance_mm};
         }
 
     bodies_.resize(models.size());
@@ -108,20 +108,20 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     history_.resize(models.size());
     searched_.assign(models.size(), 0);
 
-    pointOwner_.assign(config.maxPoints, -1);
-    explained_.assign(config.maxPoints, 0);
-    claimant_.assign(config.maxPoints, -1);
-    claimDistance_.assign(config.maxPoints, 0.0);
-    nearby_.assign(config.maxPoints, 0);
-    candidateCount_.assign(maxModelMarkers_, 0);
-    candidates_.resize(maxModelMarkers_ * config.maxCandidatesPerMarker);
-    agreement_.assign(config.maxCandidatesPerMarker, 0);
-    pointDistance_mm_.assign(config.maxPoints * config.maxPoints, 0.0F);
-    matchOfMarker_.assign(maxModelMarkers_, -1);
-    bestMatchOfMarker_.assign(maxModelMarkers_, -1);
-    fittedMatch_.assign(maxModelMarkers_, -1);
-    fitFrom_ = BoundedVector<Vec3>(maxModelMarkers_);
-    fitTo_ = BoundedVector<Vec3>(maxModelMarkers_);
+    frame_.owner.assign(config.maxPoints, -1);
+    frame_.explained.assign(config.maxPoints, 0);
+    match_.claimant.assign(config.maxPoints, -1);
+    match_.claimDistance.assign(config.maxPoints, 0.0);
+    frame_.nearby.assign(config.maxPoints, 0);
+    frame_.candidateCount.assign(models_.maxMarkers, 0);
+    frame_.candidates.resize(models_.maxMarkers * config.maxCandidatesPerMarker);
+    match_.agreement.assign(config.maxCandidatesPerMarker, 0);
+    frame_.distance_mm.assign(config.maxPoints * config.maxPoints, 0.0F);
+    match_.ofMarker.assign(models_.maxMarkers, -1);
+    match_.bestOfMarker.assign(models_.maxMarkers, -1);
+    match_.fitted.assign(models_.maxMarkers, -1);
+    match_.fitFrom = BoundedVector<Vec3>(models_.maxMarkers);
+    match_.fitTo = BoundedVector<Vec3>(models_.maxMarkers);
 }
 
 void ModelTracker::reset() {
@@ -138,12 +138,12 @@ void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
         return;
     ++counters_.frames;
     frameChecks_ = 0;
-    pointCount_ = std::min(points_rig_mm.size(), config_.maxPoints);
-    counters_.pointOverflow += points_rig_mm.size() - pointCount_;
-    points_ = points_rig_mm.first(pointCount_);
-    std::fill_n(pointOwner_.begin(), pointCount_, std::int16_t{-1});
+    frame_.count = std::min(points_rig_mm.size(), config_.maxPoints);
+    counters_.pointOverflow += points_rig_mm.size() - frame_.count;
+    frame_.points = points_rig_mm.first(frame_.count);
+    std::fill_n(frame_.owner.begin(), frame_.count, std::int16_t{-1});
     std::fill(searched_.begin(), searched_.end(), std::uint8_t{0});
-    pointDistancesReady_ = false;
+    frame_.distancesReady = false;
 
     for (std::size_t b = 0; b < bodies_.size(); ++b) {
         bodies_[b].source = PoseSource::None;
@@ -159,7 +159,7 @@ void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
     }
 
     for (std::size_t b = 0; b < bodies_.size(); ++b) {
-        if (bodies_[b].found() || slots_[b].markerCount < 4)
+        if (bodies_[b].found() || models_.slots[b].markerCount < 4)
             continue;
         if (!budgetLeft()) {
             ++counters_.searchesSkipped;
@@ -202,7 +202,7 @@ bool ModelTracker::predict(std::size_t body, double time_s,
     // Constant velocity and turn rate of the model's centroid, so that turning does not swing
     // the prediction about a far-away model origin.
     const double ahead = (time_s - h.last_s) / interval_s;
-    const Vec3& c = slots_[body].centroid_model_mm;
+    const Vec3& c = models_.slots[body].centroid_model_mm;
     const Vec3 lastCentre = h.last.apply(c);
     const Vec3 centre = lastCentre + ahead * (lastCentre - h.previous.apply(c));
     const Eigen::AngleAxisd turn(h.last.rotation * h.previous.rotation.inverse());
@@ -228,65 +228,65 @@ void ModelTracker::accept(std::size_t body, PoseSource source, const Hypothesis&
     out.T_rig_from_model = h.T_rig_from_model;
     out.markers = h.markers;
     out.rms_mm = h.rms_mm;
-    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
-        if (matchOfMarker_[i] >= 0)
-            pointOwner_[static_cast<std::size_t>(matchOfMarker_[i])] =
+    for (std::size_t i = 0; i < models_.slots[body].markerCount; ++i)
+        if (match_.ofMarker[i] >= 0)
+            frame_.owner[static_cast<std::size_t>(match_.ofMarker[i])] =
                 static_cast<std::int16_t>(body);
 }
 
 std::optional<RigidFit> ModelTracker::fitMatches(std::size_t body, std::size_t leftOut) {
     const std::span<const Vec3> model = modelMarkers(body);
-    fitFrom_.clear();
-    fitTo_.clear();
+    match_.fitFrom.clear();
+    match_.fitTo.clear();
     for (std::size_t i = 0; i < model.size(); ++i)
-        if (i != leftOut && matchOfMarker_[i] >= 0) {
-            fitFrom_.push_back(model[i]);
-            fitTo_.push_back(points_[static_cast<std::size_t>(matchOfMarker_[i])]);
+        if (i != leftOut && match_.ofMarker[i] >= 0) {
+            match_.fitFrom.push_back(model[i]);
+            match_.fitTo.push_back(frame_.points[static_cast<std::size_t>(match_.ofMarker[i])]);
         }
-    return fitRigid(fitFrom_.span(), fitTo_.span());
+    return fitRigid(match_.fitFrom.span(), match_.fitTo.span());
 }
 
 std::size_t ModelTracker::matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
                                        double radius_mm) {
-    const ModelSlot& slot = slots_[body];
+    const ModelSlot& slot = models_.slots[body];
     const std::span<const Vec3> model = modelMarkers(body);
     // Only points within the model's reach of its placed centroid can match any marker.
     const Vec3 centre = T_rig_from_model.apply(slot.centroid_model_mm);
     const double reach = slot.radius_mm + radius_mm;
     std::size_t nearbyCount = 0;
-    for (std::size_t j = 0; j < pointCount_; ++j) {
-        claimant_[j] = -1;
-        if (pointOwner_[j] < 0 && (points_[j] - centre).squaredNorm() <= reach * reach)
-            nearby_[nearbyCount++] = static_cast<std::uint16_t>(j);
+    for (std::size_t j = 0; j < frame_.count; ++j) {
+        match_.claimant[j] = -1;
+        if (frame_.owner[j] < 0 && (frame_.points[j] - centre).squaredNorm() <= reach * reach)
+            frame_.nearby[nearbyCount++] = static_cast<std::uint16_t>(j);
     }
     const double radius2 = radius_mm * radius_mm;
     const Mat3 rotation = T_rig_from_model.rotationMatrix();
     std::size_t matches = 0;
     for (std::size_t i = 0; i < model.size(); ++i) {
-        matchOfMarker_[i] = -1;
+        match_.ofMarker[i] = -1;
         const Vec3 placed = rotation * model[i] + T_rig_from_model.translation_mm;
         std::int32_t nearest = -1;
         double nearest2 = radius2;
         for (std::size_t n = 0; n < nearbyCount; ++n) {
-            const double d2 = (points_[nearby_[n]] - placed).squaredNorm();
+            const double d2 = (frame_.points[frame_.nearby[n]] - placed).squaredNorm();
             if (d2 < nearest2) {
                 nearest2 = d2;
-                nearest = nearby_[n];
+                nearest = frame_.nearby[n];
             }
         }
         if (nearest < 0)
             continue;
         const auto j = static_cast<std::size_t>(nearest);
         // A point near two placed markers belongs to the nearer one.
-        if (claimant_[j] >= 0) {
-            if (claimDistance_[j] <= nearest2)
+        if (match_.claimant[j] >= 0) {
+            if (match_.claimDistance[j] <= nearest2)
                 continue;
-            matchOfMarker_[static_cast<std::size_t>(claimant_[j])] = -1;
+            match_.ofMarker[static_cast<std::size_t>(match_.claimant[j])] = -1;
             --matches;
         }
-        claimant_[j] = static_cast<std::int32_t>(i);
-        claimDistance_[j] = nearest2;
-        matchOfMarker_[i] = nearest;
+        match_.claimant[j] = static_cast<std::int32_t>(i);
+        match_.claimDistance[j] = nearest2;
+        match_.ofMarker[i] = nearest;
         ++matches;
     }
     return matches;
@@ -303,21 +303,22 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
         if (matches < std::max<std::size_t>(minMatches, 3))
             return false;
         // The same matches as the last fit: that fit is the answer.
-        if (fitted && std::equal(matchOfMarker_.begin(),
-                                 matchOfMarker_.begin() + static_cast<std::ptrdiff_t>(model.size()),
-                                 fittedMatch_.begin()))
+        if (fitted &&
+            std::equal(match_.ofMarker.begin(),
+                       match_.ofMarker.begin() + static_cast<std::ptrdiff_t>(model.size()),
+                       match_.fitted.begin()))
             break;
         const std::optional<RigidFit> fit = fitMatches(body);
         if (!fit)
             return false;
         T_rig_from_model = fit->transform;
         out.rms_mm = fit->rms_mm;
-        std::copy_n(matchOfMarker_.begin(), model.size(), fittedMatch_.begin());
+        std::copy_n(match_.ofMarker.begin(), model.size(), match_.fitted.begin());
         fitted = true;
         radius = config_.matchRadius_mm;
     }
     // The matches must be those the final pose was fitted to.
-    std::copy_n(fittedMatch_.begin(), model.size(), matchOfMarker_.begin());
+    std::copy_n(match_.fitted.begin(), model.size(), match_.ofMarker.begin());
     matches = trimOutliers(body, T_rig_from_model, matches, std::max<std::size_t>(minMatches, 3),
                            out.rms_mm);
     out.T_rig_from_model = T_rig_from_model;
@@ -337,7 +338,7 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
         std::size_t suspect = model.size();
         RigidTransform suspectFit;
         for (std::size_t left = 0; left < model.size(); ++left) {
-            if (matchOfMarker_[left] < 0)
+            if (match_.ofMarker[left] < 0)
                 continue;
             const std::optional<RigidFit> fit = fitMatches(body, left);
             if (fit && fit->rms_mm < bestRms) {
@@ -348,12 +349,12 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
         }
         if (suspect == model.size())
             break;
-        const double residual = (points_[static_cast<std::size_t>(matchOfMarker_[suspect])] -
+        const double residual = (frame_.points[static_cast<std::size_t>(match_.ofMarker[suspect])] -
                                  suspectFit.apply(model[suspect]))
                                     .norm();
         if (residual <= std::max(config_.outlierFloor_mm, config_.outlierFactor * bestRms))
             break;
-        matchOfMarker_[suspect] = -1;
+        match_.ofMarker[suspect] = -1;
         --matches;
         T_rig_from_model = suspectFit;
         rms_mm = bestRms;
@@ -363,28 +364,28 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
 
 void ModelTracker::search(std::size_t body, double time_s) {
     std::size_t freePoints = 0;
-    for (std::size_t p = 0; p < pointCount_; ++p)
-        freePoints += pointOwner_[p] < 0;
-    if (freePoints < slots_[body].sMin)
+    for (std::size_t p = 0; p < frame_.count; ++p)
+        freePoints += frame_.owner[p] < 0;
+    if (freePoints < models_.slots[body].sMin)
         return;
     ++counters_.searches;
-    if (!pointDistancesReady_) {
+    if (!frame_.distancesReady) {
         // Every search of the frame looks up the same pairs; their distances are computed once.
-        for (std::size_t i = 0; i < pointCount_; ++i) {
-            pointDistance_mm_[i * pointCount_ + i] = 0.0F;
-            for (std::size_t j = i + 1; j < pointCount_; ++j) {
-                const auto d = static_cast<float>((points_[i] - points_[j]).norm());
-                pointDistance_mm_[i * pointCount_ + j] = d;
-                pointDistance_mm_[j * pointCount_ + i] = d;
+        for (std::size_t i = 0; i < frame_.count; ++i) {
+            frame_.distance_mm[i * frame_.count + i] = 0.0F;
+            for (std::size_t j = i + 1; j < frame_.count; ++j) {
+                const auto d = static_cast<float>((frame_.points[i] - frame_.points[j]).norm());
+                frame_.distance_mm[i * frame_.count + j] = d;
+                frame_.distance_mm[j * frame_.count + i] = d;
             }
         }
-        pointDistancesReady_ = true;
+        frame_.distancesReady = true;
     }
-    std::fill_n(explained_.begin(), pointCount_, std::uint8_t{0});
+    std::fill_n(frame_.explained.begin(), frame_.count, std::uint8_t{0});
     Hypothesis best;
     bool haveBest = false;
-    for (std::size_t p = 0; p < pointCount_; ++p) {
-        if (pointOwner_[p] >= 0 || explained_[p])
+    for (std::size_t p = 0; p < frame_.count; ++p) {
+        if (frame_.owner[p] >= 0 || frame_.explained[p])
             continue;
         if (!budgetLeft()) {
             ++counters_.searchesSkipped;
@@ -395,29 +396,30 @@ void ModelTracker::search(std::size_t body, double time_s) {
     if (!haveBest)
         return;
     ++counters_.searchHits;
-    std::copy_n(bestMatchOfMarker_.begin(), slots_[body].markerCount, matchOfMarker_.begin());
+    std::copy_n(match_.bestOfMarker.begin(), models_.slots[body].markerCount,
+                match_.ofMarker.begin());
     accept(body, PoseSource::Searched, best);
 }
 
 void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
                               bool& haveBest) {
-    const ModelSlot& slot = slots_[body];
+    const ModelSlot& slot = models_.slots[body];
     const double tolerance = config_.distanceTolerance_mm;
     const std::size_t perMarker = config_.maxCandidatesPerMarker;
-    std::fill_n(candidateCount_.begin(), slot.markerCount, 0U);
+    std::fill_n(frame_.candidateCount.begin(), slot.markerCount, 0U);
     auto addCandidate = [&](std::size_t marker, std::size_t point, std::size_t other) {
-        std::uint32_t& count = candidateCount_[marker];
+        std::uint32_t& count = frame_.candidateCount[marker];
         if (count >= perMarker) {
             ++counters_.candidateOverflow;
             return;
         }
-        candidates_[marker * perMarker + count++] =
+        frame_.candidates[marker * perMarker + count++] =
             Candidate{static_cast<std::uint16_t>(point), static_cast<std::uint16_t>(other)};
     };
 
     // The hashtable lookups: every free point q at a model edge's length from p.
-    for (std::size_t q = 0; q < pointCount_; ++q) {
-        if (q == p || pointOwner_[q] >= 0)
+    for (std::size_t q = 0; q < frame_.count; ++q) {
+        if (q == p || frame_.owner[q] >= 0)
             continue;
         ++frameChecks_;
         const double d = pointDistance(p, q);
@@ -426,8 +428,8 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
         const std::size_t lastBin = std::min(bin + 1, slot.binCount - 1);
         for (std::size_t b = firstBin; b <= lastBin; ++b) {
             const std::size_t global = slot.firstBin + b;
-            for (std::uint32_t e = binStart_[global]; e < binStart_[global + 1]; ++e) {
-                const HashEntry& entry = entries_[e];
+            for (std::uint32_t e = table_.binStart[global]; e < table_.binStart[global + 1]; ++e) {
+                const HashEntry& entry = table_.entries[e];
                 if (std::abs(entry.distance_mm - d) > tolerance)
                     continue;
                 addCandidate(entry.a, q, entry.b);
@@ -438,13 +440,13 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
 
     // Two candidates of one marker V (p's possible identity) agree when they are different
     // points and markers, co-visible, and as far apart as their markers.
-    const float* modelDistance = &modelDistance_mm_[slot.firstDistance];
+    const float* modelDistance = &models_.distance_mm[slot.firstDistance];
     const auto toleranceF = static_cast<float>(tolerance);
     auto agree = [&](const Candidate& x, const Candidate& y) {
         ++frameChecks_;
         return x.point != y.point && x.marker != y.marker &&
                adjacency(body, x.marker).contains(y.marker) &&
-               std::abs(pointDistance_mm_[x.point * pointCount_ + y.point] -
+               std::abs(frame_.distance_mm[x.point * frame_.count + y.point] -
                         modelDistance[x.marker * slot.markerCount + y.marker]) <= toleranceF;
     };
 
@@ -454,26 +456,27 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
     // graph) can take part, and a 4-clique is three of them that agree with each other.
     const std::size_t degreeNeeded = std::max<std::size_t>(slot.sMin, 4) - 2;
     for (std::size_t v = 0; v < slot.markerCount; ++v) {
-        const std::size_t count = candidateCount_[v];
+        const std::size_t count = frame_.candidateCount[v];
         if (count < degreeNeeded + 1)
             continue;
         if (!budgetLeft())
             return;
-        const Candidate* list = &candidates_[v * perMarker];
+        const Candidate* list = &frame_.candidates[v * perMarker];
         for (std::size_t a = 0; a < count; ++a)
-            agreement_[a] = 0;
+            match_.agreement[a] = 0;
         for (std::size_t a = 0; a < count; ++a)
             for (std::size_t b = a + 1; b < count; ++b)
                 if (agree(list[a], list[b])) {
-                    agreement_[a] |= std::uint64_t{1} << b;
-                    agreement_[b] |= std::uint64_t{1} << a;
+                    match_.agreement[a] |= std::uint64_t{1} << b;
+                    match_.agreement[b] |= std::uint64_t{1} << a;
                 }
         std::uint64_t alive = count == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << count) - 1;
         for (bool pruned = true; pruned;) {
             pruned = false;
             for (std::uint64_t rest = alive; rest != 0; rest &= rest - 1) {
                 const auto a = static_cast<std::size_t>(std::countr_zero(rest));
-                if (static_cast<std::size_t>(std::popcount(agreement_[a] & alive)) < degreeNeeded) {
+                if (static_cast<std::size_t>(std::popcount(match_.agreement[a] & alive)) <
+                    degreeNeeded) {
                     alive &= ~(std::uint64_t{1} << a);
                     pruned = true;
                 }
@@ -481,10 +484,12 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
         }
         for (std::uint64_t restA = alive; restA != 0; restA &= restA - 1) {
             const auto a = static_cast<std::size_t>(std::countr_zero(restA));
-            const std::uint64_t withA = agreement_[a] & alive & ~((std::uint64_t{2} << a) - 1);
+            const std::uint64_t withA =
+                match_.agreement[a] & alive & ~((std::uint64_t{2} << a) - 1);
             for (std::uint64_t restB = withA; restB != 0; restB &= restB - 1) {
                 const auto b = static_cast<std::size_t>(std::countr_zero(restB));
-                const std::uint64_t withAB = withA & agreement_[b] & ~((std::uint64_t{2} << b) - 1);
+                const std::uint64_t withAB =
+                    withA & match_.agreement[b] & ~((std::uint64_t{2} << b) - 1);
                 for (std::uint64_t restC = withAB; restC != 0; restC &= restC - 1) {
                     const auto c = static_cast<std::size_t>(std::countr_zero(restC));
                     if (!budgetLeft())
@@ -495,7 +500,7 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
                     evaluateClique(body, clique, time_s, best, haveBest);
                     // p is explained once one of its cliques gave a body: its other cliques
                     // would only find the same pose again.
-                    if (explained_[p])
+                    if (frame_.explained[p])
                         return;
                 }
             }
@@ -512,19 +517,19 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
     Vec3 to[4];
     for (std::size_t i = 0; i < 4; ++i) {
         from[i] = model[clique[i].marker];
-        to[i] = points_[clique[i].point];
+        to[i] = frame_.points[clique[i].point];
     }
     const std::optional<RigidFit> fit = fitRigid(from, to);
     if (!fit || fit->rms_mm > rmsGate(body))
         return;
     RigidTransform pose = fit->transform;
     Hypothesis h;
-    if (!refine(body, pose, config_.matchRadius_mm, slots_[body].sMin, h))
+    if (!refine(body, pose, config_.matchRadius_mm, models_.slots[body].sMin, h))
         return;
-    for (std::size_t i = 0; i < slots_[body].markerCount; ++i)
-        if (matchOfMarker_[i] >= 0)
-            explained_[static_cast<std::size_t>(matchOfMarker_[i])] = 1;
-    const Vec3 centre = h.T_rig_from_model.apply(slots_[body].centroid_model_mm);
+    for (std::size_t i = 0; i < models_.slots[body].markerCount; ++i)
+        if (match_.ofMarker[i] >= 0)
+            frame_.explained[static_cast<std::size_t>(match_.ofMarker[i])] = 1;
+    const Vec3 centre = h.T_rig_from_model.apply(models_.slots[body].centroid_model_mm);
     if (nearerCopyWants(body, centre, time_s)) {
         ++counters_.identityYields;
         return;
@@ -534,8 +539,9 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
         const History& history = history_[body];
         if (hasCopy(body) && remembers(body, time_s)) {
             // Copies keep their identity by position: the hypothesis nearest to where it was.
-            const Vec3 last = history.last.apply(slots_[body].centroid_model_mm);
-            const Vec3 bestCentre = best.T_rig_from_model.apply(slots_[body].centroid_model_mm);
+            const Vec3 last = history.last.apply(models_.slots[body].centroid_model_mm);
+            const Vec3 bestCentre =
+                best.T_rig_from_model.apply(models_.slots[body].centroid_model_mm);
             better = (centre - last).squaredNorm() < (bestCentre - last).squaredNorm();
         } else {
             better =
@@ -546,7 +552,8 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
         return;
     best = h;
     haveBest = true;
-    std::copy_n(matchOfMarker_.begin(), slots_[body].markerCount, bestMatchOfMarker_.begin());
+    std::copy_n(match_.ofMarker.begin(), models_.slots[body].markerCount,
+                match_.bestOfMarker.begin());
 }
 
 double ModelTracker::rmsGate(std::size_t body) const {
@@ -558,8 +565,8 @@ double ModelTracker::rmsGate(std::size_t body) const {
 }
 
 bool ModelTracker::hasCopy(std::size_t body) const {
-    for (std::size_t o = 0; o < slots_.size(); ++o)
-        if (o != body && slots_[o].shapeGroup == slots_[body].shapeGroup)
+    for (std::size_t o = 0; o < models_.slots.size(); ++o)
+        if (o != body && models_.slots[o].shapeGroup == models_.slots[body].shapeGroup)
             return true;
     return false;
 }
@@ -573,15 +580,16 @@ bool ModelTracker::nearerCopyWants(std::size_t body, const Vec3& centre_rig_mm,
                                    double time_s) const {
     const double own =
         remembers(body, time_s)
-            ? (history_[body].last.apply(slots_[body].centroid_model_mm) - centre_rig_mm)
+            ? (history_[body].last.apply(models_.slots[body].centroid_model_mm) - centre_rig_mm)
                   .squaredNorm()
             : std::numeric_limits<double>::infinity();
-    for (std::size_t o = 0; o < slots_.size(); ++o) {
-        if (o == body || slots_[o].shapeGroup != slots_[body].shapeGroup || bodies_[o].found() ||
-            searched_[o] || !remembers(o, time_s))
+    for (std::size_t o = 0; o < models_.slots.size(); ++o) {
+        if (o == body || models_.slots[o].shapeGroup != models_.slots[body].shapeGroup ||
+            bodies_[o].found() || searched_[o] || !remembers(o, time_s))
             continue;
         const double theirs =
-            (history_[o].last.apply(slots_[o].centroid_model_mm) - centre_rig_mm).squaredNorm();
+            (history_[o].last.apply(models_.slots[o].centroid_model_mm) - centre_rig_mm)
+                .squaredNorm();
         if (theirs < own)
             return true;
     }

@@ -148,7 +148,7 @@ public:
     /// \return for each data point of the last frame, the index in bodies() of the body that
     /// used it, or -1.
     std::span<const std::int16_t> pointOwners() const {
-        return std::span<const std::int16_t>(pointOwner_.data(), pointCount_);
+        return std::span<const std::int16_t>(frame_.owner.data(), frame_.count);
     }
 
     const ModelTrackingCounters& counters() const { return counters_; }
@@ -197,11 +197,12 @@ private:
     };
 
     std::span<const Vec3> modelMarkers(std::size_t body) const {
-        const ModelSlot& s = slots_[body];
-        return std::span<const Vec3>(markers_model_mm_).subspan(s.firstMarker, s.markerCount);
+        const ModelSlot& s = models_.slots[body];
+        return std::span<const Vec3>(models_.markers_model_mm)
+            .subspan(s.firstMarker, s.markerCount);
     }
     const MarkerSet& adjacency(std::size_t body, std::size_t marker) const {
-        return adjacency_[slots_[body].firstMarker + marker];
+        return models_.adjacency[models_.slots[body].firstMarker + marker];
     }
 
     bool predict(std::size_t body, double time_s, RigidTransform& T_rig_from_model) const;
@@ -212,73 +213,86 @@ private:
     void evaluateClique(std::size_t body, std::span<const Candidate> clique, double time_s,
                         Hypothesis& best, bool& haveBest);
     /// Match free data points to the model placed by \a pose within \a radius_mm; fills
-    /// matchOfMarker_ and returns the number of matches.
+    /// match_.ofMarker and returns the number of matches.
     std::size_t matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
                              double radius_mm);
     /// Refine \a pose by matching and fitting until the matches settle; false when fewer than
     /// \a minMatches match or the residual is too large.
     bool refine(std::size_t body, RigidTransform& T_rig_from_model, double firstRadius_mm,
                 std::size_t minMatches, Hypothesis& out);
-    /// Whether a copy of \a body that is still to be searched for was last seen nearer to
-    /// \a centre_rig_mm than \a body was.
     /// Drop up to two outlying matches (see outlierFactor); returns the matches left.
     std::size_t trimOutliers(std::size_t body, RigidTransform& T_rig_from_model,
                              std::size_t matches, std::size_t minMatches, double& rms_mm);
+    /// Whether a copy of \a body that is still to be searched for was last seen nearer to
+    /// \a centre_rig_mm than \a body was.
     bool nearerCopyWants(std::size_t body, const Vec3& centre_rig_mm, double time_s) const;
     bool hasCopy(std::size_t body) const;
     /// The largest residual (mm) a pose of \a body may have (see maxRms_mm).
     double rmsGate(std::size_t body) const;
     /// Whether \a body was found recently enough to keep its identity by position.
     bool remembers(std::size_t body, double time_s) const;
-    /// Publish \a h as \a body's pose and give it the points of matchOfMarker_.
+    /// Publish \a h as \a body's pose and give it the points of match_.ofMarker.
     void accept(std::size_t body, PoseSource source, const Hypothesis& h);
-    /// Least-squares fit of the model markers to their matches (matchOfMarker_), \a leftOut
+    /// Least-squares fit of the model markers to their matches (match_.ofMarker), \a leftOut
     /// excepted.
     std::optional<RigidFit> fitMatches(std::size_t body, std::size_t leftOut = SIZE_MAX);
     bool budgetLeft() const { return frameChecks_ < config_.searchBudget; }
 
     ModelTrackingConfig config_;
     bool valid_ = true;
-    std::size_t maxModelMarkers_ = 0;
 
-    std::vector<ModelSlot> slots_;
-    std::vector<Vec3> markers_model_mm_;
-    std::vector<MarkerSet> adjacency_;
-    /// Each model's marker-to-marker distances (mm), markerCount x markerCount from firstDistance.
-    std::vector<float> modelDistance_mm_;
-    /// CSR hashtable: bins of all models one after another; binStart_[firstBin + b]..[+ b + 1).
-    std::vector<std::uint32_t> binStart_;
-    std::vector<HashEntry> entries_;
+    /// The models as the search reads them, built once from the model set.
+    struct Models {
+        std::vector<ModelSlot> slots;
+        std::vector<Vec3> markers_model_mm;
+        std::vector<MarkerSet> adjacency;
+        /// Each model's marker-to-marker distances (mm), markerCount x markerCount from
+        /// firstDistance.
+        std::vector<float> distance_mm;
+        std::size_t maxMarkers = 0;
+    } models_;
+    /// The distance hashtable (CSR): bins of all models one after another;
+    /// binStart[firstBin + b] .. binStart[firstBin + b + 1) index entries.
+    struct DistanceTable {
+        std::vector<std::uint32_t> binStart;
+        std::vector<HashEntry> entries;
+    } table_;
 
     std::vector<TrackedBody> bodies_;
     std::vector<History> history_;
     std::vector<std::uint8_t> searched_;
     ModelTrackingCounters counters_;
 
-    // Per-frame storage, sized at construction.
-    std::span<const Vec3> points_;
-    std::size_t pointCount_ = 0;
-    std::vector<std::int16_t> pointOwner_;
-    std::vector<std::uint8_t> explained_;
-    std::vector<std::uint16_t> nearby_;
-    std::vector<std::uint32_t> candidateCount_;
-    std::vector<Candidate> candidates_;
-    /// Distances between the frame's points (mm), pointCount_ x pointCount_, computed at the
-    /// frame's first search.
-    std::vector<float> pointDistance_mm_;
-    bool pointDistancesReady_ = false;
+    /// The frame's points and what the search knows of them, sized at construction.
+    struct FramePoints {
+        std::span<const Vec3> points;
+        std::size_t count = 0;
+        /// The body each point was given to (-1: free).
+        std::vector<std::int16_t> owner;
+        std::vector<std::uint8_t> explained;
+        std::vector<std::uint16_t> nearby;
+        std::vector<std::uint32_t> candidateCount;
+        std::vector<Candidate> candidates;
+        /// Distances between the points (mm), count x count, computed at the frame's first
+        /// search.
+        std::vector<float> distance_mm;
+        bool distancesReady = false;
+    } frame_;
     double pointDistance(std::size_t a, std::size_t b) const {
-        return static_cast<double>(pointDistance_mm_[a * pointCount_ + b]);
+        return static_cast<double>(frame_.distance_mm[a * frame_.count + b]);
     }
-    /// Bit b of agreement_[a]: candidates a and b of the marker under study agree.
-    std::vector<std::uint64_t> agreement_;
-    std::vector<std::int32_t> matchOfMarker_;
-    std::vector<std::int32_t> bestMatchOfMarker_;
-    std::vector<std::int32_t> fittedMatch_;
-    std::vector<std::int32_t> claimant_;
-    std::vector<double> claimDistance_;
-    BoundedVector<Vec3> fitFrom_;
-    BoundedVector<Vec3> fitTo_;
+    /// One hypothesis's matches and fit, sized at construction.
+    struct Matching {
+        /// Bit b of agreement[a]: candidates a and b of the marker under study agree.
+        std::vector<std::uint64_t> agreement;
+        std::vector<std::int32_t> ofMarker;
+        std::vector<std::int32_t> bestOfMarker;
+        std::vector<std::int32_t> fitted;
+        std::vector<std::int32_t> claimant;
+        std::vector<double> claimDistance;
+        BoundedVector<Vec3> fitFrom{0};
+        BoundedVector<Vec3> fitTo{0};
+    } match_;
     std::uint64_t frameChecks_ = 0;
 };
 
