@@ -213,17 +213,17 @@ private:
     bool joinBodies(const SessionBuffer& session);
     struct OneBodyFit {
         /// b's frame to a's, refined by least squares over the frames that fit.
-        RigidTransform intoFromFrom;
+        RigidTransform T_into_from_from;
         /// Shared frames whose points the union of both layouts fits, every point within
         /// sameBodyTolerance_mm, each body with two or more markers found where its own pose puts
         /// them (a marker they share must be the same point for both).
         std::size_t framesFitting = 0;
     };
     /// \brief Whether \a a and \a b, found at once in \a sharedFrames (jointly, or each alone
-    /// when \a alone), are one rigid body: their layouts joined by \a aFromB and fitted as one.
+    /// when \a alone), are one rigid body: their layouts joined by \a T_a_from_b and fitted as one.
     OneBodyFit fitAsOneBody(const SessionBuffer& session, std::span<const std::size_t> sharedFrames,
                             const Body& a, const Body& b, bool alone,
-                            const RigidTransform& aFromB) const;
+                            const RigidTransform& T_a_from_b) const;
     /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
     /// with, if there were enough.
     std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,

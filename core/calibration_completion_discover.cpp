@@ -44,8 +44,8 @@ void CalibrationCompletion::discoverBodies(const SessionBuffer& session) {
         for (const Body& body : bodies_) {
             if (!body.alive || !body.posed[f])
                 continue;
-            const RigidTransform bodyFromRig = body.T_rig_from_body[f].inverse();
-            const Vec3 q = bodyFromRig.apply(p);
+            const RigidTransform T_body_from_rig = body.T_rig_from_body[f].inverse();
+            const Vec3 q = T_body_from_rig.apply(p);
             for (const Vec3& m : body.markers_mm)
                 if ((m - q).squaredNorm() <= reach2)
                     return true;

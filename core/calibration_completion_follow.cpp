@@ -66,13 +66,13 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
                            [&](const Vec3& c) { return (c - p).squaredNorm() <= radius * radius; });
     };
     // Points of frame f near the body and off every anchor become anchors; those on one count.
-    auto collect = [&](std::size_t f, const RigidTransform& rigFromBody) {
-        const RigidTransform bodyFromRig = rigFromBody.inverse();
+    auto collect = [&](std::size_t f, const RigidTransform& T_rig_from_body) {
+        const RigidTransform T_body_from_rig = T_rig_from_body.inverse();
         claim(f);
         for (const Vec3& p : session.points(f)) {
             if (isClaimed(p))
                 continue;
-            const Vec3 q = bodyFromRig.apply(p);
+            const Vec3 q = T_body_from_rig.apply(p);
             const bool inReach =
                 std::any_of(body.markers_mm.begin(), body.markers_mm.end(),
                             [&](const Vec3& m) { return (m - q).squaredNorm() <= reach2; });

@@ -72,7 +72,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             // relative pose most of them agree with: one body keeps one relative pose.
             struct Consensus {
                 std::size_t shared = 0;
-                std::optional<RigidTransform> intoFromFrom;
+                std::optional<RigidTransform> T_into_from_from;
             };
             auto consensus = [&](bool alone) {
                 Consensus c;
@@ -105,14 +105,14 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                     fitAsOneBody(session, sharedFrames, into, from, alone, relative[most.index]);
                 if (static_cast<double>(fit.framesFitting) >=
                     config_.sameBodyShare * static_cast<double>(c.shared))
-                    c.intoFromFrom = fit.intoFromFrom;
+                    c.T_into_from_from = fit.T_into_from_from;
                 return c;
             };
             // Found together often by the joint tracker, they are one body only if they move as
             // one; two alike objects would each be found alone on the same points.
             const Consensus joint = consensus(false);
-            std::optional<RigidTransform> intoFromFrom = joint.intoFromFrom;
-            if (intoFromFrom) {
+            std::optional<RigidTransform> T_into_from_from = joint.T_into_from_from;
+            if (T_into_from_from) {
                 ++counters_.joinedByMotion;
             } else if (joint.shared < config_.minSharedFrames) {
                 // Seldom found at once jointly: pieces that share markers, whose shared points the
@@ -128,24 +128,24 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                         registerLayout(from.markers_mm, into.markers_mm,
                                        config_.sameBodyTolerance_mm, kRegistrationTolerance_mm);
                     if (r.matched >= 4 && r.matched > r.runnerUp)
-                        return r.wholeFromPart;
+                        return r.T_whole_from_part;
                     return std::nullopt;
                 };
                 // Or, never in view together, one piece of a turning body may come into view just
                 // as the other leaves: the pose of the one, carried on at its speed, then lands
                 // on the other's pose by one relative pose, every time it happens.
-                if ((intoFromFrom = consensus(true).intoFromFrom))
+                if ((T_into_from_from = consensus(true).T_into_from_from))
                     ++counters_.joinedByMotion;
-                else if ((intoFromFrom = layoutPlacement()))
+                else if ((T_into_from_from = layoutPlacement()))
                     ++counters_.joinedByLayout;
-                else if ((intoFromFrom = relativePoseAcrossHandovers(session, into, from)))
+                else if ((T_into_from_from = relativePoseAcrossHandovers(session, into, from)))
                     ++counters_.joinedByHandover;
             }
-            if (!intoFromFrom)
+            if (!T_into_from_from)
                 continue;
             const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
             for (const Vec3& m : from.markers_mm) {
-                const Vec3 moved = intoFromFrom->apply(m);
+                const Vec3 moved = T_into_from_from->apply(m);
                 const bool known =
                     std::any_of(into.markers_mm.begin(), into.markers_mm.end(), [&](const Vec3& n) {
                         return (n - moved).squaredNorm() < spacing2;
@@ -160,7 +160,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             }
             // Its co-visibility is measured again from the poses.
             into.edges.clear();
-            const RigidTransform fromFromInto = intoFromFrom->inverse();
+            const RigidTransform fromFromInto = T_into_from_from->inverse();
             for (std::size_t f = 0; f < frames; ++f)
                 if (!into.posed[f] && from.posed[f]) {
                     into.posed[f] = 1;
@@ -173,12 +173,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     return joined;
 }
 
-CalibrationCompletion::OneBodyFit
-CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
-                                    std::span<const std::size_t> sharedFrames, const Body& a,
-                                    const Body& b, bool alone, const RigidTransform& aFromB) const {
+CalibrationCompletion::OneBodyFit CalibrationCompletion::fitAsOneBody(
+    const SessionBuffer& session, std::span<const std::size_t> sharedFrames, const Body& a,
+    const Body& b, bool alone, const RigidTransform& T_a_from_b) const {
     OneBodyFit result;
-    result.intoFromFrom = aFromB;
+    result.T_into_from_from = T_a_from_b;
     const auto& posesA = alone ? a.T_rig_from_body_alone : a.T_rig_from_body;
     const auto& posesB = alone ? b.T_rig_from_body_alone : b.T_rig_from_body;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
@@ -186,7 +185,7 @@ CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
     const std::size_t nA = a.markers_mm.size();
     const std::size_t nB = b.markers_mm.size();
     std::vector<Vec3> layout_a_mm(nA + nB);
-    // b's markers that are a's too (under aFromB): the index of a's, or -1 for b's own.
+    // b's markers that are a's too (under T_a_from_b): the index of a's, or -1 for b's own.
     std::vector<std::int32_t> sameAs(nB);
     std::vector<Vec3> from, to, sums(nB);
     std::vector<std::size_t> which, ownAt;
@@ -202,7 +201,7 @@ CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
         for (std::size_t k = 0; k < nA; ++k)
             layout_a_mm[k] = a.markers_mm[k];
         for (std::size_t k = 0; k < nB; ++k) {
-            layout_a_mm[nA + k] = result.intoFromFrom.apply(b.markers_mm[k]);
+            layout_a_mm[nA + k] = result.T_into_from_from.apply(b.markers_mm[k]);
             sameAs[k] = -1;
             for (std::size_t m = 0; m < nA; ++m)
                 if ((a.markers_mm[m] - layout_a_mm[nA + k]).squaredNorm() < spacing2)
@@ -288,7 +287,7 @@ CalibrationCompletion::fitAsOneBody(const SessionBuffer& session,
         const std::optional<RigidFit> placed = fitRigid(from, to);
         if (!placed || iteration + 1 == kIterations)
             break;
-        result.intoFromFrom = placed->transform;
+        result.T_into_from_from = placed->transform;
     }
     return result;
 }

@@ -113,9 +113,9 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     for (std::size_t f = 0; f < frames; ++f) {
         if (!body.posed[f])
             continue;
-        const RigidTransform bodyFromRig = body.T_rig_from_body[f].inverse();
+        const RigidTransform T_body_from_rig = body.T_rig_from_body[f].inverse();
         for (const Vec3& p : session.points(f)) {
-            const Vec3 q = bodyFromRig.apply(p);
+            const Vec3 q = T_body_from_rig.apply(p);
             if ((q - extent.centre).squaredNorm() > reach2)
                 continue;
             std::int32_t s = siteNear(q);
@@ -179,12 +179,12 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
         for (std::size_t f = 0; f < frames; ++f) {
             if (!body.posed[f])
                 continue;
-            const RigidTransform& rigFromBody = body.T_rig_from_body[f];
-            const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+            const RigidTransform& T_rig_from_body = body.T_rig_from_body[f];
+            const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
             const std::span<const Vec3> points = session.points(f);
             hitNow.clear();
             for (std::size_t k = 0; k < n; ++k) {
-                const Vec3 there = rigFromBody.apply(place[k]);
+                const Vec3 there = T_rig_from_body.apply(place[k]);
                 const bool isHit = std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
                     return (p - there).squaredNorm() <= radius2;
                 });
@@ -257,12 +257,12 @@ namespace {
 /// Adds one frame's observations to the reduced normal equations of a joint least squares over
 /// poses and markers (the frame's pose eliminated): residual r = R m + t - p, pose perturbed on
 /// the left (rotation, then translation), markers in the body frame.
-void addToReducedSystem(const RigidTransform& rigFromBody, std::span<const Vec3> markers_mm,
+void addToReducedSystem(const RigidTransform& T_rig_from_body, std::span<const Vec3> markers_mm,
                         std::span<const Vec3> points_mm, std::span<const std::size_t> which,
                         Eigen::MatrixXd& reduced, Eigen::VectorXd& rhs) {
     if (which.size() < 3)
         return;
-    const Mat3 rotation = rigFromBody.rotationMatrix();
+    const Mat3 rotation = T_rig_from_body.rotationMatrix();
     Eigen::Matrix<double, 6, 6> hpp = Eigen::Matrix<double, 6, 6>::Zero();
     Eigen::Matrix<double, 6, 1> gp = Eigen::Matrix<double, 6, 1>::Zero();
     // Per observation: its pose Jacobian (3 x 6) and residual, kept for the second pass.
@@ -272,7 +272,7 @@ void addToReducedSystem(const RigidTransform& rigFromBody, std::span<const Vec3>
     std::array<Vec3, kMaxObservations> residual;
     for (std::size_t i = 0; i < count; ++i) {
         const Vec3 turned = rotation * markers_mm[i];
-        residual[i] = turned + rigFromBody.translation_mm - points_mm[i];
+        residual[i] = turned + T_rig_from_body.translation_mm - points_mm[i];
         Mat3 skew;
         skew << 0.0, -turned.z(), turned.y(), turned.z(), 0.0, -turned.x(), -turned.y(), turned.x(),
             0.0;

@@ -82,17 +82,17 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body
     for (std::size_t f = 0; f < frames; ++f) {
         if (!body.posed[f])
             continue;
-        const RigidTransform& rigFromBody = body.T_rig_from_body[f];
-        const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+        const RigidTransform& T_rig_from_body = body.T_rig_from_body[f];
+        const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
         for (std::size_t m = 0; m < body.markers_mm.size(); ++m) {
-            if (nearestPoint(session.points(f), rigFromBody.apply(body.markers_mm[m]), radius) ==
-                nullptr)
+            if (nearestPoint(session.points(f), T_rig_from_body.apply(body.markers_mm[m]),
+                             radius) == nullptr)
                 continue;
             keepViewDirection(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), thinning);
         }
     }
-    auto seenFromHere = [&](const RigidTransform& rigFromBody, std::uint32_t m) {
-        const Vec3 viewpoint = rigFromBody.inverse().apply(config_.viewpoint_rig_mm);
+    auto seenFromHere = [&](const RigidTransform& T_rig_from_body, std::uint32_t m) {
+        const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
         return seenFromNear(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), sameView);
     };
 

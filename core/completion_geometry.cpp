@@ -161,7 +161,7 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
     forEachPlacement([&](const RigidTransform& t, std::size_t count) {
         if (count > best.matched) {
             best.matched = count;
-            best.wholeFromPart = t;
+            best.T_whole_from_part = t;
             bestOnto = onto;
         }
     });

@@ -45,7 +45,7 @@ Agreement mostAgreed(std::span<const RigidTransform> transforms, const Extent& b
 /// The placement of one layout in another: which transform, how many markers it puts onto the
 /// other's, and how many the best different placement puts there.
 struct Registration {
-    RigidTransform wholeFromPart;
+    RigidTransform T_whole_from_part;
     std::size_t matched = 0;
     std::size_t runnerUp = 0;
 };

@@ -310,7 +310,7 @@ std::size_t ObjectCalibrator::objectViews(std::span<CalibrationObjectView> out) 
         v.visible = static_cast<std::size_t>(std::count_if(
             o.members.begin(), o.members.end(), [](const Member& m) { return m.visible; }));
         v.posed = o.posed;
-        v.rigFromObject = o.rigFromObject;
+        v.T_rig_from_object = o.T_rig_from_object;
     }
     return count;
 }

@@ -92,7 +92,7 @@ struct CalibrationObjectView {
     std::size_t visible = 0;
     bool posed = false;
     /// Rig from object-graph frame (mm); meaningful when posed.
-    RigidTransform rigFromObject{};
+    RigidTransform T_rig_from_object{};
 };
 
 /**
@@ -164,7 +164,7 @@ public:
                 v.visible = m.visible;
                 v.established = established(m);
                 v.position_rig_mm = m.visible ? markers_[m.marker].position_rig_mm
-                                              : o.rigFromObject.apply(m.model_mm);
+                                              : o.T_rig_from_object.apply(m.model_mm);
                 v.model_mm = m.model_mm;
                 visit(v);
             }
@@ -239,7 +239,7 @@ private:
         BoundedVector<Edge> edges;
         bool dirty = false;
         bool posed = false;
-        RigidTransform rigFromObject{};
+        RigidTransform T_rig_from_object{};
         /// Frame (counters.frames) of its creation, and of the last loss of its pose.
         std::uint64_t bornFrame = 0;
         std::uint64_t lostAtFrame = 0;
@@ -283,10 +283,10 @@ private:
         }
         return false;
     }
-    /// The first member of \a o (of those \a which names) that \a toFromObject puts
+    /// The first member of \a o (of those \a which names) that \a T_to_from_object puts
     /// within the reappearance radius of \a p_mm; kNone when there is none.
-    std::size_t memberNear(const Object& o, const RigidTransform& toFromObject, const Vec3& p_mm,
-                           Members which) const;
+    std::size_t memberNear(const Object& o, const RigidTransform& T_to_from_object,
+                           const Vec3& p_mm, Members which) const;
 
     void bindTrackedMarkers(std::span<const TrackedMarker> tracked);
     void removeInvalidMarkers();
@@ -298,7 +298,7 @@ private:
     /// An object's pose (rig from object-graph frame, mm) and whether only established members
     /// made it.
     struct ConsensusPose {
-        RigidTransform rigFromObject;
+        RigidTransform T_rig_from_object;
         bool fromEstablished = false;
     };
     /// The pose most of fitFrom_/fitTo_ agree with (weighted by votes_), refitted by refit().
@@ -346,8 +346,8 @@ private:
     void mergeDuplicates();
     void mergeByLayout();
     /// Moves \a from's members (those \a carry names; the rest are dropped) into \a into, through
-    /// \a intoFromFrom, and deactivates \a from.
-    void merge(Object& from, Object& into, const RigidTransform& intoFromFrom,
+    /// \a T_into_from_from, and deactivates \a from.
+    void merge(Object& from, Object& into, const RigidTransform& T_into_from_from,
                Members carry = Members::Any);
 
     /// A free object slot; when none is free, the slot of the object least worth keeping (see

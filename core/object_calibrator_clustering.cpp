@@ -121,7 +121,7 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
             for (std::size_t j = i + 1; j < n; ++j)
                 if (newIndex[i] != kNone && newIndex[j] != kNone)
                     edge(*part, newIndex[i], newIndex[j]) = edge(whole, i, j);
-        part->rigFromObject = whole.rigFromObject;
+        part->T_rig_from_object = whole.T_rig_from_object;
         fitPose(*part, Remeasure::All);
     }
     // Members of no cluster leave this object.
@@ -250,7 +250,7 @@ void ObjectCalibrator::removeGhosts(Object& o) {
     // with another), so the marker it stood for came back as a new member long ago: the stale
     // one goes. (Markers seen with it being in view is not enough on its own: on a cube, the
     // face beside it can be in view for seconds while its own face is turned away.)
-    const RigidTransform objectFromRig = o.rigFromObject.inverse();
+    const RigidTransform T_object_from_rig = o.T_rig_from_object.inverse();
     for (std::size_t i = o.members.size(); i-- > 0;) {
         Member& m = o.members[i];
         if (!m.verified || !established(m))
@@ -259,7 +259,7 @@ void ObjectCalibrator::removeGhosts(Object& o) {
         if (clarity < kMinFacingClarity)
             continue;
         const Vec3 towardsCameras_object =
-            objectFromRig.rotation * (-o.rigFromObject.apply(m.model_mm).normalized());
+            T_object_from_rig.rotation * (-o.T_rig_from_object.apply(m.model_mm).normalized());
         if (towardsCameras_object.dot(m.seenFrom_object) < kFacingCosine * clarity)
             continue;
         std::size_t partnersSeen = 0;

@@ -24,7 +24,7 @@ void ObjectCalibrator::recogniseReappearing(std::span<const TrackedMarker> track
             for (const Member& member : o.members) {
                 if (markers_[member.marker].visible)
                     continue;
-                const double d2 = (o.rigFromObject.apply(member.model_mm) - p).squaredNorm();
+                const double d2 = (o.T_rig_from_object.apply(member.model_mm) - p).squaredNorm();
                 if (d2 <= bestDistance2) {
                     bestDistance2 = d2;
                     best = member.marker;
@@ -87,9 +87,9 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
     for (Object& o : objects_) {
         if (!o.active || !o.posed)
             continue;
-        const RigidTransform objectFromRig = o.rigFromObject.inverse();
+        const RigidTransform T_object_from_rig = o.T_rig_from_object.inverse();
         for (std::size_t k : candidates_) {
-            if (!addMember(o, k, objectFromRig.apply(markers_[k].position_rig_mm)))
+            if (!addMember(o, k, T_object_from_rig.apply(markers_[k].position_rig_mm)))
                 continue;
             o.members.back().visible = true;
             connectToVisible(o, o.members.size() - 1);
@@ -112,7 +112,7 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
         connectToVisible(*o, o->members.size() - 1);
     }
     o->posed = true;
-    o->rigFromObject = RigidTransform::identity();
+    o->T_rig_from_object = RigidTransform::identity();
 }
 
 std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
@@ -200,12 +200,13 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
     return refit->transform;
 }
 
-std::size_t ObjectCalibrator::memberNear(const Object& o, const RigidTransform& toFromObject,
+std::size_t ObjectCalibrator::memberNear(const Object& o, const RigidTransform& T_to_from_object,
                                          const Vec3& p_mm, Members which) const {
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     for (std::size_t i = 0; i < o.members.size(); ++i) {
         const Member& m = o.members[i];
-        if (selects(which, m) && (toFromObject.apply(m.model_mm) - p_mm).squaredNorm() <= radius2)
+        if (selects(which, m) &&
+            (T_to_from_object.apply(m.model_mm) - p_mm).squaredNorm() <= radius2)
             return i;
     }
     return kNone;
@@ -237,7 +238,7 @@ void ObjectCalibrator::refind(Object& o) {
         ++counters_.markersReappeared;
     }
     o.posed = true;
-    o.rigFromObject = *best;
+    o.T_rig_from_object = *best;
     ++counters_.refound;
 }
 

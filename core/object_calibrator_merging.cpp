@@ -67,18 +67,18 @@ void ObjectCalibrator::mergeDuplicates() {
                 // be the body's hidden ones.
                 if (body.lostAtFrame >= fragment.bornFrame)
                     continue;
-                const std::optional<RigidTransform> rigFromBody =
+                const std::optional<RigidTransform> T_rig_from_body =
                     fitLayout(body, searchPoints_.span(), Members::Occluded);
-                if (!rigFromBody)
+                if (!T_rig_from_body)
                     continue;
                 // The smaller goes into the larger: a body seen from a new side after it came
                 // back may have grown past what was learnt before it was lost.
                 if (larger) {
                     body.posed = true;
-                    body.rigFromObject = *rigFromBody;
-                    merge(fragment, body, rigFromBody->inverse() * fragment.rigFromObject);
+                    body.T_rig_from_object = *T_rig_from_body;
+                    merge(fragment, body, T_rig_from_body->inverse() * fragment.T_rig_from_object);
                 } else {
-                    merge(body, fragment, fragment.rigFromObject.inverse() * *rigFromBody);
+                    merge(body, fragment, fragment.T_rig_from_object.inverse() * *T_rig_from_body);
                 }
                 ++counters_.merged;
                 structureChanged_ = true;
@@ -95,14 +95,14 @@ void ObjectCalibrator::mergeDuplicates() {
                 const Vec3& p = markers_[a.marker].position_rig_mm;
                 for (const Member& m : body.members)
                     if (m.verified && established(m) &&
-                        (body.rigFromObject.apply(m.model_mm) - p).squaredNorm() <= radius2) {
+                        (body.T_rig_from_object.apply(m.model_mm) - p).squaredNorm() <= radius2) {
                         ++onBody;
                         break;
                     }
             }
             if (onBody < kMergeInPlaceMin)
                 continue;
-            merge(fragment, body, body.rigFromObject.inverse() * fragment.rigFromObject);
+            merge(fragment, body, body.T_rig_from_object.inverse() * fragment.T_rig_from_object);
             ++counters_.merged;
             structureChanged_ = true;
             break;
@@ -172,19 +172,19 @@ void ObjectCalibrator::mergeByLayout() {
             // The smaller layout is searched for in the larger one, so that most of the smaller
             // one must lie on the larger: a small lost piece of a large posed object, or a small
             // posed piece of a large lost body.
-            std::optional<RigidTransform> fragmentFromBody;
+            std::optional<RigidTransform> T_fragment_from_body;
             if (group.established < searchPoints_.size()) {
                 if (const std::optional<RigidTransform> bodyFromFragment =
                         fitLayout(fragment, piecePoints_.span(), Members::Verified))
-                    fragmentFromBody = bodyFromFragment->inverse();
+                    T_fragment_from_body = bodyFromFragment->inverse();
             } else {
-                fragmentFromBody = fitLayout(body, searchPoints_.span(), layout);
+                T_fragment_from_body = fitLayout(body, searchPoints_.span(), layout);
             }
-            if (!fragmentFromBody)
+            if (!T_fragment_from_body)
                 continue;
             // Into the posed object, whose frame is the current one; the body's members of the
             // other frame cannot be placed and are dropped.
-            merge(body, fragment, *fragmentFromBody, layout);
+            merge(body, fragment, *T_fragment_from_body, layout);
             ++counters_.merged;
             structureChanged_ = true;
             return;
@@ -206,7 +206,7 @@ void ObjectCalibrator::recordObjectsSeenApart() {
             if (!m.verified || !established(m))
                 continue;
             inView += m.visible ? 1 : 0;
-            centre += o.rigFromObject.apply(m.model_mm);
+            centre += o.T_rig_from_object.apply(m.model_mm);
             ++establishedCount;
         }
         if (inView < 3)
@@ -215,7 +215,7 @@ void ObjectCalibrator::recordObjectsSeenApart() {
         double radius = 0.0;
         for (const Member& m : o.members)
             if (m.verified && established(m))
-                radius = std::max(radius, (o.rigFromObject.apply(m.model_mm) - centre).norm());
+                radius = std::max(radius, (o.T_rig_from_object.apply(m.model_mm) - centre).norm());
         extentCentre_[i] = centre;
         extentRadius_[i] = radius;
     }
@@ -243,7 +243,7 @@ void ObjectCalibrator::setSeenApart(std::size_t a, std::size_t b, bool apart) {
     set(b, a);
 }
 
-void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& intoFromFrom,
+void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& T_into_from_from,
                              Members carry) {
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     FixedVector<std::size_t, MarkerSet::kCapacity> indexInto;
@@ -252,7 +252,7 @@ void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& i
             indexInto.push_back(kNone);
             continue;
         }
-        const Vec3 position = intoFromFrom.apply(a.model_mm);
+        const Vec3 position = T_into_from_from.apply(a.model_mm);
         std::size_t match = kNone;
         double nearest2 = radius2;
         for (std::size_t j = 0; j < into.members.size(); ++j) {
@@ -290,7 +290,7 @@ void ObjectCalibrator::merge(Object& from, Object& into, const RigidTransform& i
             copy.recentAgreement = a.recentAgreement;
             copy.partnersLeftUnseen = a.partnersLeftUnseen;
             copy.lastSeenFrame = a.lastSeenFrame;
-            copy.seenFrom_object = intoFromFrom.rotation * a.seenFrom_object;
+            copy.seenFrom_object = T_into_from_from.rotation * a.seenFrom_object;
             copy.seenFromSamples = a.seenFromSamples;
             indexInto.push_back(into.members.size() - 1);
         } else {

@@ -24,7 +24,7 @@ void ObjectCalibrator::updateObject(Object& o) {
     whereabouts_.clear();
     for (const Member& m : o.members) {
         positionNow_.push_back(m.visible ? markers_[m.marker].position_rig_mm
-                                         : o.rigFromObject.apply(m.model_mm));
+                                         : o.T_rig_from_object.apply(m.model_mm));
         whereabouts_.push_back(m.visible           ? Whereabouts::Seen
                                : predictable(o, m) ? Whereabouts::Predicted
                                                    : Whereabouts::Unknown);
@@ -78,17 +78,17 @@ void ObjectCalibrator::updateObject(Object& o) {
     if (!o.posed)
         return;
     removeGhosts(o);
-    const RigidTransform objectFromRig = o.rigFromObject.inverse();
+    const RigidTransform T_object_from_rig = o.T_rig_from_object.inverse();
     for (Member& member : o.members) {
         if (!member.visible || !member.inlier)
             continue;
         member.samples = std::min(member.samples + 1, config_.modelAverage_frames);
         member.model_mm +=
-            (objectFromRig.apply(markers_[member.marker].position_rig_mm) - member.model_mm) /
+            (T_object_from_rig.apply(markers_[member.marker].position_rig_mm) - member.model_mm) /
             member.samples;
         member.seenFromSamples = std::min(member.seenFromSamples + 1, config_.modelAverage_frames);
         const Vec3 towardsCameras_object =
-            objectFromRig.rotation * (-markers_[member.marker].position_rig_mm.normalized());
+            T_object_from_rig.rotation * (-markers_[member.marker].position_rig_mm.normalized());
         member.seenFrom_object +=
             (towardsCameras_object - member.seenFrom_object) / member.seenFromSamples;
         ++member.framesReliable;
@@ -126,8 +126,8 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             o.lostAtFrame = counters_.frames;
         return;
     }
-    const RigidTransform& pose = consensus->rigFromObject;
-    const RigidTransform objectFromRig = pose.inverse();
+    const RigidTransform& pose = consensus->T_rig_from_object;
+    const RigidTransform T_object_from_rig = pose.inverse();
     for (Member& member : o.members) {
         if (!member.visible)
             continue;
@@ -138,7 +138,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
             (again && (pose.apply(member.model_mm) - p).norm() > config_.poseInlier_mm)) {
             // Measured under another frame (a re-based object, or a part that split off): it is
             // measured again in this one, and has to earn its place in the model again.
-            member.model_mm = objectFromRig.apply(p);
+            member.model_mm = T_object_from_rig.apply(p);
             member.samples = 1;
             member.framesReliable = 0;
             member.verified = true;
@@ -151,7 +151,7 @@ void ObjectCalibrator::fitPose(Object& o, Remeasure remeasure) {
         member.recentResidual_mm += edgeAlpha_ * (residual - member.recentResidual_mm);
     }
     o.posed = true;
-    o.rigFromObject = pose;
+    o.T_rig_from_object = pose;
     if (remeasure == Remeasure::All)
         for (Member& member : o.members)
             if (!member.visible)
@@ -282,7 +282,7 @@ void ObjectCalibrator::rebase(Object& o) {
         }
     }
     o.posed = true;
-    o.rigFromObject = RigidTransform::identity();
+    o.T_rig_from_object = RigidTransform::identity();
     ++counters_.rebased;
 }
 

@@ -104,7 +104,7 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
         for (std::size_t i = 0; i < best.layoutMarkerOf.size(); ++i) {
             if (best.layoutMarkerOf[i] >= 0 && best.matched >= 4)
                 continue;
-            const Vec3 p = best.layoutFromModel.apply(model.markers_model_mm[i]);
+            const Vec3 p = best.T_layout_from_model.apply(model.markers_model_mm[i]);
             double nearest = std::numeric_limits<double>::infinity();
             for (const Vec3& q : layouts[k])
                 nearest = std::min(nearest, (p - q).norm());
@@ -122,7 +122,7 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
                 continue;
             }
             ++hits[k][static_cast<std::size_t>(best.layoutMarkerOf[i])];
-            const double d = (best.layoutFromModel.apply(model.markers_model_mm[i]) -
+            const double d = (best.T_layout_from_model.apply(model.markers_model_mm[i]) -
                               layouts[k][static_cast<std::size_t>(best.layoutMarkerOf[i])])
                                  .squaredNorm();
             squared[k] += d;
@@ -276,7 +276,7 @@ int main(int argc, char** argv) {
             std::vector<bool> use(traced.size());
             for (std::size_t i = 0; i < traced.size(); ++i)
                 use[i] = traced[i].seen.last.first == object;
-            RigidTransform layoutFromModel{};
+            RigidTransform T_layout_from_model{};
             for (int round = 0; round < 3; ++round) {
                 std::vector<Vec3> from, to;
                 for (std::size_t i = 0; i < traced.size(); ++i)
@@ -287,17 +287,18 @@ int main(int argc, char** argv) {
                 const std::optional<RigidFit> fit = fitRigid(from, to);
                 if (!fit)
                     break;
-                layoutFromModel = fit->transform;
+                T_layout_from_model = fit->transform;
                 for (std::size_t i = 0; i < traced.size(); ++i)
-                    use[i] = traced[i].seen.last.first == object &&
-                             (layoutFromModel.apply(traced[i].view.model_mm) - truthOf(traced[i]))
-                                     .norm() < kMatch_mm;
+                    use[i] =
+                        traced[i].seen.last.first == object &&
+                        (T_layout_from_model.apply(traced[i].view.model_mm) - truthOf(traced[i]))
+                                .norm() < kMatch_mm;
             }
             int off = 0;
             for (const Traced& t : traced) {
                 const double error =
                     t.seen.last.first == object
-                        ? (layoutFromModel.apply(t.view.model_mm) - truthOf(t)).norm()
+                        ? (T_layout_from_model.apply(t.view.model_mm) - truthOf(t)).norm()
                         : -1.0;
                 if (error >= 0.0 && error < kMatch_mm)
                     continue;
@@ -359,7 +360,8 @@ int main(int argc, char** argv) {
                             return;
                         const auto it = seenAs.find(v.markerId);
                         const double residual =
-                            (views[i].rigFromObject.apply(v.model_mm) - v.position_rig_mm).norm();
+                            (views[i].T_rig_from_object.apply(v.model_mm) - v.position_rig_mm)
+                                .norm();
                         std::printf(" %u=%d:%d%s/%.1f", v.markerId,
                                     it != seenAs.end() ? it->second.last.first : -1,
                                     it != seenAs.end() ? it->second.last.second : -1,

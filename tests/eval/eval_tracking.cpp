@@ -176,7 +176,7 @@ int main(int argc, char** argv) {
     }
     struct Fit {
         std::size_t object;
-        RigidTransform objectFromModel;
+        RigidTransform T_object_from_model;
     };
     std::vector<std::vector<Fit>> fits(models.size());
     for (std::size_t b = 0; b < models.size(); ++b) {
@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
             if (a.matched > bestMatched + 1)
                 fits[b].clear();
             bestMatched = std::max(bestMatched, a.matched);
-            fits[b].push_back(Fit{k, a.layoutFromModel});
+            fits[b].push_back(Fit{k, a.T_layout_from_model});
         }
         if (fits[b].empty())
             std::printf("model %u matches no object of the scene\n", models[b].id);
@@ -237,7 +237,7 @@ int main(int argc, char** argv) {
                 double nearest = 1e300;
                 for (const Fit& fit : fits[b]) {
                     const RigidTransform truth =
-                        observation.objectPoses[fit.object] * fit.objectFromModel;
+                        observation.objectPoses[fit.object] * fit.T_object_from_model;
                     const double d =
                         (truth.translation_mm - body.T_rig_from_model.translation_mm).norm();
                     if (d < nearest) {
@@ -249,10 +249,10 @@ int main(int argc, char** argv) {
             if (objectOf[b] < 0)
                 continue;
             const auto k = static_cast<std::size_t>(objectOf[b]);
-            RigidTransform objectFromModel;
+            RigidTransform T_object_from_model;
             for (const Fit& fit : fits[b])
                 if (fit.object == k)
-                    objectFromModel = fit.objectFromModel;
+                    T_object_from_model = fit.T_object_from_model;
             BodyStats& s = stats[b];
             const bool eligible = reconstructed[k] >= models[b].sMin;
             s.eligible += eligible;
@@ -263,7 +263,7 @@ int main(int argc, char** argv) {
                 continue;
             }
             (eligible ? s.foundEligible : s.foundOther) += 1;
-            const RigidTransform truth = observation.objectPoses[k] * objectFromModel;
+            const RigidTransform truth = observation.objectPoses[k] * T_object_from_model;
             const double position =
                 (truth.translation_mm - body.T_rig_from_model.translation_mm).norm();
             const double rotation =

@@ -13,7 +13,7 @@ namespace {
 void assign(const MarkerModel& model, const std::vector<Vec3>& layout, double tolerance_mm,
             const RigidTransform& transform, ModelAlignment& out) {
     const auto& pm = model.markers_model_mm;
-    out.layoutFromModel = transform;
+    out.T_layout_from_model = transform;
     out.layoutMarkerOf.assign(pm.size(), -1);
     out.matched = 0;
     for (std::size_t i = 0; i < pm.size(); ++i) {

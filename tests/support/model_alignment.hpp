@@ -11,7 +11,7 @@ namespace edgetrack::test {
 /// \brief A model laid onto a reference layout.
 struct ModelAlignment {
     /// Maps model coordinates onto the layout's (mm).
-    RigidTransform layoutFromModel{};
+    RigidTransform T_layout_from_model{};
     /// For each model marker, the layout marker it lands on (within the tolerance), or -1.
     std::vector<int> layoutMarkerOf;
     std::size_t matched = 0;

@@ -87,7 +87,7 @@ TEST(LayoutRegistration, PlacesAPieceOnItsLayoutWhateverTheOrderOfMarkers) {
     EXPECT_EQ(r.matched, 5U);
     EXPECT_LT(r.runnerUp, 5U);
     for (std::size_t i = 0; i < piece.size(); ++i)
-        EXPECT_LT((r.wholeFromPart.apply(piece[i]) - whole[taken[i]]).norm(), 1e-6);
+        EXPECT_LT((r.T_whole_from_part.apply(piece[i]) - whole[taken[i]]).norm(), 1e-6);
 }
 
 // A piece of a regular layout (a row of squares) fits it in several places: registration says

@@ -100,7 +100,7 @@ TEST(CalibrationRealData, ViconBoxIsOneObjectOfItsEightMarkers) {
         EXPECT_LT(a.rms_mm, 1.0);
         for (std::size_t m = 0; m < models[i].markers_model_mm.size(); ++m)
             if (a.layoutMarkerOf[m] >= 0) {
-                EXPECT_LT((a.layoutFromModel.apply(models[i].markers_model_mm[m]) -
+                EXPECT_LT((a.T_layout_from_model.apply(models[i].markers_model_mm[m]) -
                            layout[static_cast<std::size_t>(a.layoutMarkerOf[m])])
                               .norm(),
                           1.0);

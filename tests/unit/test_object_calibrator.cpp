@@ -289,7 +289,7 @@ TEST(ObjectCalibrator, NewMarkersOfAPassingBodyDoNotDragThePose) {
                 if (v.objectId != views[i].id || !v.visible || !v.established)
                     return;
                 const double residual =
-                    (views[i].rigFromObject.apply(v.model_mm) - v.position_rig_mm).norm();
+                    (views[i].T_rig_from_object.apply(v.model_mm) - v.position_rig_mm).norm();
                 worstResidual_mm = std::max(worstResidual_mm, residual);
             });
             ++framesChecked;

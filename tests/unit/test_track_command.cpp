@@ -64,24 +64,25 @@ struct Consistency {
 
 Consistency consistencyWith(const std::vector<PoseRow>& poses, std::uint32_t body,
                             const std::vector<recording::TruthRow>& truth, std::int64_t object) {
-    std::vector<RigidTransform> objectFromModel;
+    std::vector<RigidTransform> T_object_from_model;
     for (const PoseRow& pose : poses) {
         if (pose.body != body)
             continue;
         for (const recording::TruthRow& t : truth)
             if (t.frame == pose.frame && t.object == static_cast<int>(object))
-                objectFromModel.push_back(t.T_rig_from_object.inverse() * pose.T_rig_from_model);
+                T_object_from_model.push_back(t.T_rig_from_object.inverse() *
+                                              pose.T_rig_from_model);
     }
     Consistency c;
-    if (objectFromModel.empty())
+    if (T_object_from_model.empty())
         return c;
     c = Consistency{0.0, 0.0};
-    for (const RigidTransform& t : objectFromModel) {
-        c.spread_mm =
-            std::max(c.spread_mm, (t.translation_mm - objectFromModel[0].translation_mm).norm());
-        c.spread_deg = std::max(c.spread_deg,
-                                rotationAngleBetween_rad(t.rotation, objectFromModel[0].rotation) *
-                                    180.0 / 3.14159265358979);
+    for (const RigidTransform& t : T_object_from_model) {
+        c.spread_mm = std::max(c.spread_mm,
+                               (t.translation_mm - T_object_from_model[0].translation_mm).norm());
+        c.spread_deg = std::max(
+            c.spread_deg, rotationAngleBetween_rad(t.rotation, T_object_from_model[0].rotation) *
+                              180.0 / 3.14159265358979);
     }
     return c;
 }
