@@ -13,13 +13,9 @@
 #include <unistd.h>
 
 #include "firmware_app/app/can_log.hpp"
+#include "firmware_app/app/run_board.hpp"
 #include "firmware_app/firmware/firmware.hpp"
 #include "firmware_app/formats/model_file.hpp"
-#include "firmware_app/formats/recording.hpp"
-#include "hal/linux/linux_board.hpp"
-#include "hal/linux/posix_udp_sender.hpp"
-#include "hal/sim/scene.hpp"
-#include "hal/sim/sim_board.hpp"
 
 namespace edgetrack::app {
 
@@ -70,50 +66,6 @@ private:
 /// Exit code asking systemd (Restart=on-failure) for a new process: EX_TEMPFAIL.
 constexpr int kExitRestart = 75;
 
-/// The stereo calibration of the real cameras, which must be for the configured image size.
-Result<StereoRig> loadBoardRig(const FirmwareConfig& config) {
-    if (config.cameras.rigFile.empty())
-        return Error{"--board linux needs the stereo calibration: set [cameras] rig (INTERFACES "
-                     "§2)"};
-    Result<StereoRig> rig = recording::readRig(config.cameras.rigFile);
-    if (!rig)
-        return rig;
-    for (int c = 0; c < 2; ++c) {
-        const CameraIntrinsics& intrinsics = rig->camera(c).intrinsics();
-        if (intrinsics.width_px != config.cameras.width_px ||
-            intrinsics.height_px != config.cameras.height_px)
-            return Error{config.cameras.rigFile.string() + ": camera " + std::to_string(c) +
-                         " is calibrated at " + std::to_string(intrinsics.width_px) + "x" +
-                         std::to_string(intrinsics.height_px) + ", [cameras] asks for " +
-                         std::to_string(config.cameras.width_px) + "x" +
-                         std::to_string(config.cameras.height_px)};
-    }
-    return rig;
-}
-
-linux_hal::LinuxBoardConfig linuxBoardConfig(const FirmwareConfig& config) {
-    linux_hal::LinuxBoardConfig board;
-    board.cameras.ids = {config.cameras.ids[0], config.cameras.ids[1]};
-    board.cameras.width_px = config.cameras.width_px;
-    board.cameras.height_px = config.cameras.height_px;
-    board.cameras.frameRate_hz = config.cameras.frameRate_hz;
-    board.cameras.exposure_us = config.cameras.exposure_us;
-    board.cameras.pairTolerance_us = config.cameras.pairTolerance_us;
-    board.cameras.buffers = config.cameras.buffers;
-    board.gpioChip = config.gpio.chip;
-    board.ledLine = config.gpio.ledLine;
-    board.buttonLine = config.gpio.buttonLine;
-    board.statusLine = config.gpio.statusLine;
-    board.buttonActiveLow = config.gpio.buttonActiveLow;
-    board.flashDevice = config.flash.device;
-    board.flashSize = config.flash.size_bytes;
-    board.flashEraseBlock = config.flash.eraseBlock_bytes;
-    board.canEnabled = config.can.enabled;
-    board.can.interface = config.can.interface;
-    board.can.fd = config.can.fd;
-    return board;
-}
-
 } // namespace
 
 int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std::ostream& err) {
@@ -142,51 +94,21 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     if (!options.canLog.empty())
         config.can.enabled = true;
     // The only place that picks a backend.
-    std::unique_ptr<sim::SimBoard> sim;
-    std::unique_ptr<linux_hal::PosixUdpSender> simUdp;
-    std::unique_ptr<linux_hal::LinuxBoard> linuxBoard;
-    std::optional<hal::Board> simBoardView;
-    StereoRig rig;
-    std::string boardName;
-    if (options.board == "linux") {
-        Result<StereoRig> loaded = loadBoardRig(config);
-        if (!loaded) {
-            err << "edgetrack run: " << loaded.error().message << "\n";
-            return 1;
-        }
-        rig = *loaded;
-        linuxBoard = std::make_unique<linux_hal::LinuxBoard>(linuxBoardConfig(config));
-        if (!linuxBoard->isValid()) {
-            err << "edgetrack run: " << linuxBoard->errorText() << "\n";
-            return 1;
-        }
-        boardName = "Linux board";
-    } else {
-        const std::string sceneName = options.scene.empty() ? "two_cubes" : options.scene;
-        std::optional<sim::Scene> scene = sim::makeScene(sceneName, options.seed);
-        if (!scene) {
-            err << "edgetrack run: unknown scene '" << sceneName << "' (edgetrack sim --list)\n";
-            return 2;
-        }
-        sim::SimBoardOptions boardOptions;
-        boardOptions.realTime = true;
-        boardOptions.cameraBufferPairs = config.cameras.buffers;
-        boardOptions.flashSize = config.flash.size_bytes;
-        boardOptions.flashEraseBlock = config.flash.eraseBlock_bytes;
-        sim = std::make_unique<sim::SimBoard>(std::move(*scene), options.seed, boardOptions);
-        // The simulated board's UDP is the host's: a DTrack client on this machine sees the poses.
-        simUdp = std::make_unique<linux_hal::PosixUdpSender>();
-        if (!simUdp->isValid()) {
-            err << "edgetrack run: cannot open a UDP socket: "
-                << std::strerror(simUdp->errnoAtOpen()) << "\n";
-            return 1;
-        }
-        simBoardView.emplace(hal::Board{sim->clock, sim->cameras, sim->ledRing, sim->button,
-                                        sim->statusLed, sim->flash, sim->can, *simUdp});
-        rig = sim->world.rig();
-        boardName = "simulated board, scene '" + sceneName + "'";
+    const std::string scene = options.scene.empty() ? "two_cubes" : options.scene;
+    if (options.board != "linux" && !isSimScene(scene)) {
+        // A bad argument, like an unknown option.
+        err << "edgetrack run: unknown scene '" << scene << "' (edgetrack sim --list)\n";
+        return 2;
     }
-    hal::Board& backendBoard = linuxBoard ? linuxBoard->board() : *simBoardView;
+    Result<std::unique_ptr<RunBoard>> made = options.board == "linux"
+                                                 ? makeLinuxRunBoard(config)
+                                                 : makeSimRunBoard(config, scene, options.seed);
+    if (!made) {
+        err << "edgetrack run: " << made.error().message << "\n";
+        return 1;
+    }
+    RunBoard& runBoard = **made;
+    hal::Board& backendBoard = runBoard.board();
     // The CAN log sits between the firmware and the board's bus, so any board can log.
     std::unique_ptr<CanLogBus> canLog;
     std::optional<hal::Board> loggingBoard;
@@ -203,15 +125,13 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     }
     hal::Board& board = loggingBoard ? *loggingBoard : backendBoard;
 
-    Firmware firmware(config, board, rig);
+    Firmware firmware(config, board, runBoard.rig());
     if (!firmware.isValid()) {
         err << "edgetrack run: " << firmware.error() << "\n";
         return 1;
     }
     firmware.start();
-    out << "edgetrack run: " << boardName << "; " << firmware.flashReport() << "\n";
-    if (linuxBoard)
-        out << "edgetrack run: " << linuxBoard->cameras().describe() << "\n";
+    out << "edgetrack run: " << runBoard.describe() << "; " << firmware.flashReport() << "\n";
     if (!options.models.empty()) {
         Result<std::vector<NamedModel>> models =
             readModelDirectory(options.models, MarkerSet::kCapacity);
@@ -231,7 +151,9 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
             out << "edgetrack run: DTrack UDP to " << int{to.address[0]} << "."
                 << int{to.address[1]} << "." << int{to.address[2]} << "." << int{to.address[3]}
                 << ":" << to.port << "\n";
-    const bool interactive = sim && options.buttonFromStdin && ::isatty(STDIN_FILENO) != 0;
+    // A board whose button is typed (the simulated one) takes presses from standard input.
+    const bool typedButton = options.buttonFromStdin && runBoard.hasTypedButton();
+    const bool interactive = typedButton && ::isatty(STDIN_FILENO) != 0;
     if (interactive)
         out << "edgetrack run: press Enter to start or end a calibration (the button), type "
                "'long' to delete all models, 's' for the status view, Ctrl-C to stop\n";
@@ -242,7 +164,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     std::signal(SIGTERM, onStopSignal);
     std::signal(SIGUSR1, onReportSignal);
 
-    StdinButton stdinButton(sim != nullptr && options.buttonFromStdin);
+    StdinButton stdinButton(typedButton);
     std::uint64_t watchdogInterval_us = 0;
     const bool watchdog = sd_watchdog_enabled(0, &watchdogInterval_us) > 0;
     const hal::Nanoseconds statusPeriod =
@@ -256,11 +178,10 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     while (!stopRequested) {
         switch (stdinButton.poll()) {
         case StdinButton::Press::Short:
-            sim->button.press(board.clock.now(), 200 * hal::kNanosecondsPerMillisecond);
+            runBoard.press(200 * hal::kNanosecondsPerMillisecond);
             break;
         case StdinButton::Press::Long:
-            sim->button.press(board.clock.now(),
-                              static_cast<hal::Nanoseconds>((config.gpio.longPress_s + 0.3) * 1e9));
+            runBoard.press(static_cast<hal::Nanoseconds>((config.gpio.longPress_s + 0.3) * 1e9));
             break;
         case StdinButton::Press::Status:
             reportRequested = true;
@@ -270,7 +191,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         }
         firmware.step();
         const hal::Nanoseconds now = board.clock.now();
-        if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+        if (runBoard.needsProcessRestart()) {
             err << "\nedgetrack run: a camera's device was removed while streaming; libcamera "
                    "cannot take it back in this process: exiting so that systemd starts "
                    "edgetrack again\n";
@@ -280,14 +201,14 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
             // Cameras, flash and outputs up; on the real board the GPIO lines and CAN too.
             nextReadyCheck = now + 200 * hal::kNanosecondsPerMillisecond;
             std::string why;
-            if (linuxBoard && !linuxBoard->devicesUp(why)) {
+            if (!runBoard.devicesUp(why)) {
                 if (why != waitingFor)
                     err << "\nedgetrack run: waiting for " << why << "\n" << std::flush;
                 waitingFor = why;
             } else {
                 sd_notify(0, "READY=1");
                 notifiedReady = true;
-                out << "edgetrack run: ready (cameras" << (linuxBoard ? ", GPIO" : "")
+                out << "edgetrack run: ready (" << runBoard.devicesName()
                     << (config.can.enabled ? ", CAN" : "") << " up)\n"
                     << std::flush;
             }
@@ -324,9 +245,8 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
             out << ", " << canLog->writeFailures() << " writes failed";
         out << "\n";
     }
-    if (linuxBoard)
-        out << linuxBoard->report();
-    if (linuxBoard && linuxBoard->cameras().needsProcessRestart()) {
+    out << runBoard.report();
+    if (runBoard.needsProcessRestart()) {
         out << std::flush;
         err << std::flush;
         // libcamera still holds the removed camera: leave without running its destructors.

@@ -51,6 +51,7 @@ public:
 
     hal::Board& board() { return board_; }
     LibcameraCameraPair& cameras() { return cameras_; }
+    const LibcameraCameraPair& cameras() const { return cameras_; }
 
     /**
      * \brief Whether the GPIO lines and the CAN interface (when enabled) are usable now.
