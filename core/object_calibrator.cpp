@@ -329,8 +329,8 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
         // until they are seen again: a model takes the members of one frame, the larger group.
         const Members frame = largerFrameGroup(o).members;
         // A member that mostly disagreed with the pose when last seen is not where the model
-        // would put it (three_cubes seed 17: a marker of another cube, established in the frames
-        // after a re-base, then seen off the pose for 20 s). Most, not the last sighting: the
+        // would put it (a marker of another body, established in the frames after a re-base,
+        // then seen off the pose for good). Most, not the last sighting: the
         // frame-to-frame tracker can hand a vanishing marker's ID to a neighbour for a frame.
         for (std::size_t i = 0; i < o.members.size(); ++i)
             if (established(o.members[i]) && selects(frame, o.members[i]) &&

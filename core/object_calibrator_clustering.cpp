@@ -57,12 +57,10 @@ void ObjectCalibrator::clusterObject(std::size_t objectIndex) {
     const MarkerSet all = MarkerSet::firstN(n);
     // A member hidden for long whose place no pose predicts has edges that were last measured
     // when it was seen and hold however the bodies moved since: in the clustering, its edges
-    // chain into one cluster bodies that have long moved apart (cube_sphere seed 33: the sphere
-    // stayed in the cube's object for 30 s, which filled its 96 members). It stays with the
-    // object, out of the clustering, until it is seen. Not at once: over seeds 1-80 leaving out
-    // every such member lost markers of the two_cubes scene in more runs than it saved (440-441
-    // right of 480 against 445); from 3 s on, 452 (7 more of three_cubes, 3 of cube_sphere, 3
-    // fewer of two_cubes); from 1 s on, 450.
+    // chain into one cluster bodies that have long moved apart (a sphere can stay in a cube's
+    // object until the object's members run out). It stays with the object, out of the
+    // clustering, until it is seen. Not at once (untracked_hidden_frames, 3 s): a member hidden
+    // for a moment is far more often still on its body, and leaving it out loses markers.
     MarkerSet untracked;
     for (std::size_t i = 0; i < n; ++i) {
         const Member& m = o.members[i];
@@ -143,24 +141,22 @@ void ObjectCalibrator::forgetAmbiguousHiddenMembers(Object& o, std::span<const M
     // object's pose predicts for it), was hidden while the two moved apart: which body it is on
     // is not known. Its predicted place follows this object's pose, so its edges to the leaving
     // members broke however it moved, and kept established it would be exported here though it
-    // may be on the other body (three_cubes seed 31: three markers of one cube in another's
-    // model, last seen in the first 2.5 s when all were one object). It has to be seen again to
-    // count, as the hidden members of a part that splits off do.
+    // may be on the other body (markers of one cube in another's model, last seen in the first
+    // seconds when all were one object). It has to be seen again to count, as the hidden members
+    // of a part that splits off do.
     //
     // A body leaves as another cluster, or one member at a time as members of no cluster when
     // it turns as it goes: its far markers drift from the pose first and their drift breaks its
     // own edges (AMarkerHiddenWhileABodyTurnedAwayIsInNeitherModel). Members of no cluster count
     // once three have left since the hidden member was last seen: one or two are a noisy member
-    // or a piece of something passing by, not a body (counting each at once lost a marker for
-    // good in two_cubes seed 5). Then the member only stays out of the models until it is seen
-    // (placeInDoubt): forgetting it as at a split fired in 4 of 320 sweep runs, mostly for
-    // members of the kept body, and in three_cubes seed 28 the 13 members it forgot at once
-    // changed which part kept the object and ended in a model with 21 false markers.
+    // or a piece of something passing by, not a body (counting each at once can lose a marker
+    // for good). Then the member only stays out of the models until it is seen (placeInDoubt):
+    // forgetting it, as at a split, fires mostly for members of the body that stays, and many
+    // members forgotten at once can change which part keeps the object.
     //
     // Only established members count: new markers of a body passing by join every object in
-    // view and leave again, and edges to them say nothing of where a hidden member is (over
-    // seeds 1-80 counting them too put the cube_sphere scene's median time to complete models up
-    // from 10 s to 14 s for no more right runs).
+    // view and leave again, and edges to them say nothing of where a hidden member is (counting
+    // them too only delays complete models).
     const auto mature = static_cast<std::uint32_t>(config_.edgeWindow_frames);
     MarkerSet clustered;
     for (const MarkerSet& c : clusters)
