@@ -166,6 +166,82 @@ TEST(CalibrationRealData, ViconBoxCompletedTheSameWhateverTheOrderOfPoints) {
     }
 }
 
+const std::filesystem::path kQualisys =
+    std::filesystem::path(EDGETRACK_REALDATA_DIR) / "ezc3d-testFiles" / "Qualisys.c3d";
+
+// The whole calibration of a recording in one point order (0: the file's; else shuffled).
+std::vector<MarkerModel> learnC3d(const recording::C3dPoints& c3d, const CalibrationConfig& config,
+                                  unsigned shuffleSeed) {
+    CalibrationSession session(config, CompletionConfig{}, c3d.frameCount,
+                               c3d.frameCount * c3d.pointCount);
+    std::mt19937 shuffler(shuffleSeed);
+    std::vector<Vec3> points;
+    for (std::size_t f = 0; f < c3d.frameCount; ++f) {
+        framePoints(c3d, f, points);
+        if (shuffleSeed != 0)
+            std::shuffle(points.begin(), points.end(), shuffler);
+        session.update(static_cast<double>(f) / c3d.frameRate_hz, points);
+    }
+    return session.complete();
+}
+
+// The Qualisys recording's headband (L_HDF, L_HDB, R_HDB, R_HDF) sits on skin: its markers keep
+// their distances only within about +-1.7 mm while the trunk's and limbs' move 10 mm and more
+// against it. With the default edge tolerance (2 mm) no model holds it; with the setting
+// docs/object-calibration.md gives for markers on skin ([calibration] edge_break_mm = 5) it is
+// one model of its four markers, with none of the trunk's, in every point order.
+TEST(CalibrationRealData, QualisysHeadbandIsOneModelWithTheSkinTolerance) {
+    if (!std::filesystem::exists(kQualisys))
+        GTEST_SKIP() << kQualisys << " is absent (the shared real-data folder is not here)";
+    const Result<recording::C3dPoints> c3d = recording::readC3d(kQualisys);
+    ASSERT_TRUE(c3d) << c3d.error().message;
+    std::vector<std::size_t> headband;
+    for (std::size_t p = 0; p < c3d->pointCount; ++p)
+        for (const char* label : {"L_HDF", "L_HDB", "R_HDB", "R_HDF"})
+            if (c3d->labels[p] == label)
+                headband.push_back(p);
+    ASSERT_EQ(headband.size(), 4u);
+    const std::vector<Vec3> layout = labelledBox(*c3d, headband);
+
+    // Within 3 mm of the labelled layout: the markers wander up to 1.7 mm on the skin.
+    auto headbandModels = [&](const std::vector<MarkerModel>& models) {
+        std::vector<test::ModelAlignment> found;
+        for (const MarkerModel& model : models) {
+            test::ModelAlignment a = test::alignModel(model, layout, 3.0);
+            if (a.matched >= 3) {
+                EXPECT_EQ(model.markers_model_mm.size(), a.matched)
+                    << "markers of the trunk or limbs in the headband's model";
+                found.push_back(std::move(a));
+            }
+        }
+        return found;
+    };
+    EXPECT_TRUE(headbandModels(learnC3d(*c3d, CalibrationConfig{}, 0)).empty())
+        << "the default tolerance was expected to refuse skin markers";
+
+    CalibrationConfig skin;
+    skin.edgeBreak_mm = 5.0;
+    const std::vector<MarkerModel> models = learnC3d(*c3d, skin, 0);
+    const std::vector<test::ModelAlignment> found = headbandModels(models);
+    ASSERT_EQ(found.size(), 1u);
+    EXPECT_EQ(found[0].matched, 4u);
+    RecordProperty("headband_rms_mm", std::to_string(found[0].rms_mm));
+#ifdef EDGETRACK_SLOW_TARGET
+    constexpr unsigned kShuffledOrders = 1;
+#else
+    constexpr unsigned kShuffledOrders = 5;
+#endif
+    for (unsigned order = 1; order <= kShuffledOrders; ++order) {
+        const std::vector<MarkerModel> shuffled = learnC3d(*c3d, skin, order);
+        ASSERT_EQ(shuffled.size(), models.size()) << "order " << order;
+        for (std::size_t m = 0; m < models.size(); ++m) {
+            ASSERT_EQ(shuffled[m].markers_model_mm.size(), models[m].markers_model_mm.size());
+            for (std::size_t k = 0; k < models[m].markers_model_mm.size(); ++k)
+                EXPECT_EQ(shuffled[m].markers_model_mm[k], models[m].markers_model_mm[k]);
+        }
+    }
+}
+
 // Learn on one half, track the box through the other half with every model learnt. The issue asks
 // for first half -> second half; after the first 2.9 s the calibrator holds no established box
 // (docs/model-tracking.md, "Real data"), so the halves are taken the other way round.
