@@ -160,8 +160,7 @@ void Firmware::note(std::string event) {
 // The state machine
 
 void Firmware::changeState(FirmwareState next) {
-    if (state_ == FirmwareState::Calibrating && next != FirmwareState::Finishing &&
-        calibration_.isOpen()) {
+    if (state_ == FirmwareState::Calibrating && calibration_.isOpen()) {
         calibration_.close();
         ++counters_.calibrationsAbandoned;
     }

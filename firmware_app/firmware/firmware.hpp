@@ -8,8 +8,6 @@
 #include <string>
 #include <vector>
 
-#include "core/bounded_vector.hpp"
-#include "core/calibration_session.hpp"
 #include "core/marker_pipeline.hpp"
 #include "core/model_tracker.hpp"
 #include "core/ring_buffer.hpp"
@@ -155,8 +153,8 @@ public:
     std::string statusReport() const;
 
 private:
-    /// The one place the state changes; a calibration left for any state but Finishing is
-    /// counted as abandoned.
+    /// The one place the state changes; a calibration left while its session is still open
+    /// (neither finished nor ended with nothing learnt) is counted as abandoned.
     void changeState(FirmwareState next);
     void handleButton(hal::Nanoseconds now);
     void startCalibration();
