@@ -179,6 +179,7 @@ int main(int argc, char** argv) {
     std::size_t allowMissing = 0;
     bool verbose = false;
     bool trace = false;
+    bool timeline = false;
     std::int64_t traceEvery = 0;
     std::int64_t traceObject = -1, traceFrom = 0, traceTo = 0;
     app.add_option("--scene", sceneName);
@@ -198,6 +199,8 @@ int main(int argc, char** argv) {
     app.add_option("--allow-missing", allowMissing,
                    "with --require-complete, this many markers in all may be missing");
     app.add_flag("--verbose", verbose, "print the objects every second");
+    app.add_flag("--timeline", timeline,
+                 "with --verbose, the markers of each model in view every 5th frame");
     app.add_flag(
         "--trace", trace,
         "at the end, list members more than 1.5 mm from the true marker they were seen as");
@@ -235,6 +238,8 @@ int main(int argc, char** argv) {
     // Per object, every set of three or more of its markers seen together (a bit per marker; an
     // object of more than 64 markers is not looked at): what the data can tie together rigidly.
     std::vector<std::set<std::uint64_t>> seenTogether(layouts.size());
+    // The same per frame, for --verbose's account of why pieces of one object stayed apart.
+    std::vector<std::vector<std::uint64_t>> inViewPerFrame(layouts.size());
 
     struct Seen {
         std::pair<int, int> first{-1, -1};
@@ -385,9 +390,11 @@ int main(int argc, char** argv) {
                 if (m.marker < 64)
                     together[static_cast<std::size_t>(m.object)] |= std::uint64_t{1} << m.marker;
             }
-        for (std::size_t k = 0; k < layouts.size(); ++k)
+        for (std::size_t k = 0; k < layouts.size(); ++k) {
             if (layouts[k].size() <= 64 && std::popcount(together[k]) >= 3)
                 seenTogether[k].insert(together[k]);
+            inViewPerFrame[k].push_back(together[k]);
+        }
         for (const int source : visible)
             if (static_cast<std::size_t>(source) < observation.markers.size()) {
                 const sim::MarkerView& m = observation.markers[static_cast<std::size_t>(source)];
@@ -540,6 +547,61 @@ int main(int argc, char** argv) {
                     "  model %zu on object %zu: false markers at (mm from the nearest):%s\n", i,
                     final.objectOfModel[i], off.c_str());
         }
+    if (verbose) {
+        // Which true markers each model holds, and, per pair of models of one object, in how
+        // many frames each was in view with four of its markers while the other had markers
+        // in view that it lacks: the frames that could have tied them together.
+        std::vector<std::uint64_t> heldBy(count, 0);
+        for (std::size_t i = 0; i < count; ++i) {
+            const std::size_t k = final.objectOfModel[i];
+            if (layouts[k].size() > 64)
+                continue;
+            const test::ModelAlignment a = test::alignModel(models[i], layouts[k], kMatch_mm);
+            std::string held;
+            for (const int m : a.layoutMarkerOf)
+                if (m >= 0) {
+                    heldBy[i] |= std::uint64_t{1} << m;
+                    held += " " + std::to_string(m);
+                }
+            std::printf("  model %zu holds of object %zu (RMS %.3f mm):%s\n", i, k, a.rms_mm,
+                        held.c_str());
+        }
+        for (std::size_t i = 0; i < count; ++i)
+            for (std::size_t j = 0; j < count; ++j) {
+                const std::size_t k = final.objectOfModel[i];
+                if (i == j || final.objectOfModel[j] != k || layouts[k].size() > 64)
+                    continue;
+                long aWithOther = 0, both4 = 0, both3 = 0;
+                for (const std::uint64_t v : inViewPerFrame[k]) {
+                    const int a = std::popcount(v & heldBy[i]);
+                    const int b = std::popcount(v & heldBy[j]);
+                    aWithOther += a >= 4 && std::popcount(v & heldBy[j] & ~heldBy[i]) > 0;
+                    both4 += a >= 4 && b >= 4;
+                    both3 += a >= 3 && b >= 3;
+                }
+                std::printf("  models %zu, %zu: frames %zu in view by 4 with markers of %zu it "
+                            "lacks %ld; both by 4 %ld, by 3 %ld\n",
+                            i, j, i, j, aWithOther, both4, both3);
+            }
+        if (timeline && !layouts.empty() && count <= 9) {
+            // Markers of each model in view, every 5th frame (one digit per model, then those of
+            // the first object that no model holds).
+            std::string line;
+            for (std::size_t f = 0; f < inViewPerFrame[0].size(); f += 5) {
+                for (std::size_t i = 0; i < count; ++i)
+                    line += static_cast<char>(
+                        '0' + std::min(9, std::popcount(inViewPerFrame[0][f] & heldBy[i])));
+                std::uint64_t anyModel = 0;
+                for (std::size_t i = 0; i < count; ++i)
+                    anyModel |= heldBy[i];
+                line += '+';
+                line += static_cast<char>(
+                    '0' + std::min(9, std::popcount(inViewPerFrame[0][f] & ~anyModel)));
+                line += (f / 5 + 1) % 10 == 0 ? '\n' : ' ';
+            }
+            std::printf("%s\n", line.c_str());
+        }
+    }
     if (trace)
         printOffMembers(frames);
     if (completeAt >= 0.0)
