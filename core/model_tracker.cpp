@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Eigenvalues>
+
 #include "core/disjoint_sets.hpp"
 #include "core/rigid_fit.hpp"
 
@@ -323,7 +325,42 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
                            out.rms_mm);
     out.T_rig_from_model = T_rig_from_model;
     out.markers = static_cast<std::uint32_t>(matches);
-    return out.rms_mm <= rmsGate(body);
+    if (out.rms_mm > rmsGate(body))
+        return false;
+    if (!spreadOffOneLine(body)) {
+        ++counters_.degeneratePoses;
+        return false;
+    }
+    return true;
+}
+
+bool ModelTracker::spreadOffOneLine(std::size_t body) const {
+    const std::span<const Vec3> model = modelMarkers(body);
+    Vec3 centroid = Vec3::Zero();
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < model.size(); ++i)
+        if (match_.ofMarker[i] >= 0) {
+            centroid += model[i];
+            ++n;
+        }
+    if (n < 3)
+        return false;
+    centroid /= static_cast<double>(n);
+    Mat3 scatter = Mat3::Zero();
+    for (std::size_t i = 0; i < model.size(); ++i)
+        if (match_.ofMarker[i] >= 0)
+            scatter += (model[i] - centroid) * (model[i] - centroid).transpose();
+    // The eigenvector of the largest eigenvalue is the line that fits the markers best.
+    const Eigen::SelfAdjointEigenSolver<Mat3> eigen(scatter);
+    const Vec3 axis = eigen.eigenvectors().col(2);
+    const double spread2 = config_.minPoseSpread_mm * config_.minPoseSpread_mm;
+    for (std::size_t i = 0; i < model.size(); ++i)
+        if (match_.ofMarker[i] >= 0) {
+            const Vec3 offset = model[i] - centroid;
+            if ((offset - offset.dot(axis) * axis).squaredNorm() >= spread2)
+                return true;
+        }
+    return false;
 }
 
 std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_from_model,

@@ -49,6 +49,10 @@ struct ModelTrackingConfig {
     /// A body followed from its prediction stays found with this many markers, even below its
     /// S_min: its identity comes from continuity, S_min only has to hold when it is first found.
     std::uint32_t minTrackedMarkers = 4;
+    /// The matched markers of a pose must lie at least this far (mm, largest distance in the
+    /// model frame) off the line that fits them best: markers on one line leave the turn about it
+    /// undetermined, and such a pose puts every other marker of the body at random.
+    double minPoseSpread_mm = 3.0;
     /// A body with a copy (same layout) that was found within this time (s) keeps its identity by
     /// position when both are searched for: each copy takes the hypothesis nearest to where it was.
     double identityMemory_s = 2.0;
@@ -102,6 +106,7 @@ struct ModelTrackingCounters {
     std::uint64_t budgetExhausted = 0;    ///< frames in which the search budget ran out
     std::uint64_t searchesSkipped = 0;    ///< searches not run or cut short by the budget
     std::uint64_t identityYields = 0;     ///< hypotheses left to a copy that was nearer to them
+    std::uint64_t degeneratePoses = 0;    ///< poses refused: their markers lie on one line
 };
 
 /**
@@ -217,9 +222,12 @@ private:
     std::size_t matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
                              double radius_mm);
     /// Refine \a pose by matching and fitting until the matches settle; false when fewer than
-    /// \a minMatches match or the residual is too large.
+    /// \a minMatches match, the residual is too large or the matches lie on one line.
     bool refine(std::size_t body, RigidTransform& T_rig_from_model, double firstRadius_mm,
                 std::size_t minMatches, Hypothesis& out);
+    /// Whether the matched markers of \a body (match_.ofMarker) lie minPoseSpread_mm or more off
+    /// the line that fits them best.
+    bool spreadOffOneLine(std::size_t body) const;
     /// Drop up to two outlying matches (see outlierFactor); returns the matches left.
     std::size_t trimOutliers(std::size_t body, RigidTransform& T_rig_from_model,
                              std::size_t matches, std::size_t minMatches, double& rms_mm);

@@ -537,6 +537,7 @@ std::string Firmware::statusReport() const {
     const ModelTrackingCounters& t = tracker_->counters();
     row("tracking: points refused", t.pointOverflow);
     row("tracking: frames out of budget", t.budgetExhausted);
+    row("tracking: poses refused (markers on one line)", t.degeneratePoses);
     const OutputCounters& o = outputs_.counters();
     row("udp sent", o.udpSent);
     row("udp failed", o.udpFailed);

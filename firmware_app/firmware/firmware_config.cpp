@@ -152,6 +152,7 @@ void readTracking(Section& s, ModelTrackingConfig& t, std::size_t& maxModels) {
     s.real("prediction_radius_mm", t.predictionRadius_mm, 0.0, Section::kNoLimit, true);
     s.real("prediction_horizon_s", t.predictionHorizon_s, 0.0);
     s.integer("min_tracked_markers", t.minTrackedMarkers, 3, 128);
+    s.real("min_pose_spread_mm", t.minPoseSpread_mm, 0.0);
     s.real("identity_memory_s", t.identityMemory_s, 0.0);
     s.integer("max_points", t.maxPoints, 4, 65535);
     s.integer("max_candidates_per_marker", t.maxCandidatesPerMarker, 4, 64);

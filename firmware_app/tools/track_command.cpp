@@ -113,7 +113,8 @@ Status runTrack(const TrackOptions& options, std::ostream& summary, std::ostream
             << c.predictionFailures << ", hypotheses " << c.hypotheses << "; refused: points "
             << c.pointOverflow << ", candidates " << c.candidateOverflow
             << ", frames out of search budget " << c.budgetExhausted << " (searches skipped "
-            << c.searchesSkipped << ")\n";
+            << c.searchesSkipped << "), poses from markers on one line " << c.degeneratePoses
+            << "\n";
     return Ok{};
 }
 

@@ -125,6 +125,40 @@ TEST(ModelTracker, NeedsSminMarkersToFindButFewerToFollow) {
     expectPose(tracker.bodies()[0], truth, 1e-6);
 }
 
+TEST(ModelTracker, GivesNoPoseFromMarkersOnOneLine) {
+    // A row of four markers 20 mm apart, within 0.3 mm of one line as a measured row is, and two
+    // markers off it: the row alone says next to nothing of the turn about its line, so it must
+    // neither find nor carry the body.
+    const std::vector<Vec3> layout = {{0, 0, 0},     {20, 0.3, 0}, {40, -0.2, 0.2},
+                                      {60, 0, -0.3}, {25, 30, 0},  {45, 10, 25}};
+    const MarkerModel model = completeModel(layout, 0, 4);
+    ModelTracker tracker(std::span(&model, 1), ModelTrackingConfig{});
+    const auto row = [](std::size_t i) { return i < 4; };
+    std::vector<Vec3> points;
+
+    place(layout, pose(0.3, {0, 1, 1}, {0.0, 0.0, 500.0}), row, points);
+    tracker.update(0.0, points);
+    EXPECT_FALSE(tracker.bodies()[0].found()) << "four markers on one line";
+
+    // Found with the markers off the line, then followed as they leave: lost with them.
+    for (int f = 1; f <= 3; ++f) {
+        points.clear();
+        place(layout, pose(0.3 + 0.01 * f, {0, 1, 1}, {0.5 * f, 0.0, 500.0}), all, points);
+        tracker.update(0.01 * f, points);
+        ASSERT_TRUE(tracker.bodies()[0].found()) << "frame " << f;
+    }
+    const auto rowAndOne = [](std::size_t i) { return i < 5; };
+    points.clear();
+    place(layout, pose(0.34, {0, 1, 1}, {2.0, 0.0, 500.0}), rowAndOne, points);
+    tracker.update(0.04, points);
+    EXPECT_TRUE(tracker.bodies()[0].found()) << "one marker 30 mm off the line is enough";
+    points.clear();
+    place(layout, pose(0.35, {0, 1, 1}, {2.5, 0.0, 500.0}), row, points);
+    tracker.update(0.05, points);
+    EXPECT_FALSE(tracker.bodies()[0].found()) << "followed onto the row alone";
+    EXPECT_GT(tracker.counters().degeneratePoses, 0u);
+}
+
 TEST(ModelTracker, FollowsAMovingBodyByPrediction) {
     const std::vector<Vec3> layout = test::irregularLayout(15, 21, 12.0);
     const MarkerModel model = completeModel(layout, 0, 4);
