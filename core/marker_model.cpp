@@ -83,41 +83,91 @@ std::size_t countCongruent(const MarkerModel& from, const MarkerModel& to,
     return count;
 }
 
+/// Calls visit(x, y) for every co-visible ordered pair of \a adjB, whatever its length: the
+/// plain walk, for a few triangles.
+struct EveryPair {
+    const Adjacency& adjB;
+    template <typename Visit>
+    void operator()(double, double, Visit&& visit) const {
+        for (std::size_t x = 0; x < adjB.size(); ++x)
+            adjB[x].forEach([&](std::size_t y) { visit(x, y); });
+    }
+};
+
+/// Calls visit(x, y) for the co-visible ordered pairs whose length lies within \a tolerance of
+/// \a d_mm (and a few just outside, which the caller's exact test refuses), found by a binary
+/// search in the pairs sorted by length: for every triangle of a model against every pair of
+/// another, the walk over all pairs is what made S_min dear.
+struct PairsByLength {
+    std::span<const SminWorkspace::Pair> sorted;
+    template <typename Visit>
+    void operator()(double d_mm, double tolerance, Visit&& visit) const {
+        // Lengths are kept as float; the margin keeps every pair the double test would take.
+        const auto low = static_cast<float>(d_mm - tolerance) - 1e-3F;
+        const auto high = static_cast<float>(d_mm + tolerance) + 1e-3F;
+        auto it = std::lower_bound(
+            sorted.begin(), sorted.end(), low,
+            [](const SminWorkspace::Pair& p, float value) { return p.length_mm < value; });
+        for (; it != sorted.end() && it->length_mm <= high; ++it)
+            visit(it->x, it->y);
+    }
+};
+
+void sortPairs(const MarkerModel& b, const Adjacency& adjB, SminWorkspace::PairList& pairs) {
+    pairs.clear();
+    const auto& pb = b.markers_model_mm;
+    for (std::size_t x = 0; x < adjB.size(); ++x)
+        adjB[x].forEach([&](std::size_t y) {
+            pairs.push_back({static_cast<float>((pb[x] - pb[y]).norm()),
+                             static_cast<std::uint8_t>(x), static_cast<std::uint8_t>(y)});
+        });
+    std::sort(pairs.begin(), pairs.end(),
+              [](const SminWorkspace::Pair& l, const SminWorkspace::Pair& r) {
+                  return l.length_mm != r.length_mm ? l.length_mm < r.length_mm
+                         : l.x != r.x               ? l.x < r.x
+                                                    : l.y < r.y;
+              });
+}
+
 /**
  * Call visit(x, y, z) for every co-visible triangle of `b` whose sides match (within `tolerance`)
- * the sides |ij|, |ik|, |jk| of a triangle, in that order; stop when visit returns true.
+ * the sides |ij|, |ik|, |jk| of a triangle, in that order; stop when visit returns true. The
+ * pairs (x, y) come from \a pairsNear (EveryPair or PairsByLength); which triangles are visited
+ * does not depend on it, only their order.
  * \return whether a visit stopped the search.
  */
-template <typename Visit>
+template <typename PairsNear, typename Visit>
 bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::span<const Vec3> pb,
-                              const Adjacency& adjB, double tolerance, Visit&& visit) {
+                              const Adjacency& adjB, double tolerance, const PairsNear& pairsNear,
+                              Visit&& visit) {
     const double dij = (i - j).norm();
     const double dik = (i - k).norm();
     const double djk = (j - k).norm();
     bool stopped = false;
-    for (std::size_t x = 0; x < adjB.size() && !stopped; ++x) {
-        adjB[x].forEach([&](std::size_t y) {
-            if (stopped || std::abs((pb[x] - pb[y]).norm() - dij) > tolerance)
+    pairsNear(dij, tolerance, [&](std::size_t x, std::size_t y) {
+        if (stopped || std::abs((pb[x] - pb[y]).norm() - dij) > tolerance)
+            return;
+        (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
+            if (stopped || std::abs((pb[x] - pb[z]).norm() - dik) > tolerance ||
+                std::abs((pb[y] - pb[z]).norm() - djk) > tolerance)
                 return;
-            (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
-                if (stopped || std::abs((pb[x] - pb[z]).norm() - dik) > tolerance ||
-                    std::abs((pb[y] - pb[z]).norm() - djk) > tolerance)
-                    return;
-                stopped = visit(x, y, z);
-            });
+            stopped = visit(x, y, z);
         });
-    }
+    });
     return stopped;
 }
 
 // The most markers of `a` that fit `b` under one transform other than the identity of a model
-// with itself, found from congruent co-visible triangles.
+// with itself, found from congruent co-visible triangles. The result is a maximum, so the order
+// in which the pairs of b come does not matter.
 std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const MarkerModel& b,
-                              const Adjacency& adjB, bool self, const SminConfig& config) {
+                              const Adjacency& adjB, std::span<const SminWorkspace::Pair> pairsB,
+                              bool self, const SminConfig& config) {
     const double tol = config.tolerance_mm;
     const double tol2 = tol * tol;
     const auto& pa = a.markers_model_mm;
     const auto& pb = b.markers_model_mm;
+    const PairsByLength pairsNear{pairsB};
     std::size_t best = 0;
     for (std::size_t i = 0; i < adjA.size(); ++i) {
         adjA[i].forEach([&](std::size_t j) {
@@ -127,7 +177,7 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
                 if (k <= j || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
                     return;
                 forEachCongruentTriangle(
-                    pa[i], pa[j], pa[k], pb.span(), adjB, tol,
+                    pa[i], pa[j], pa[k], pb.span(), adjB, tol, pairsNear,
                     [&](std::size_t x, std::size_t y, std::size_t z) {
                         if (self && x == i && y == j && z == k)
                             return false;
@@ -184,7 +234,7 @@ bool mapsOnto(const MarkerModel& a, const MarkerModel& b, double needed, double 
         });
     for (const Triangle& t : widest) {
         const bool found = forEachCongruentTriangle(
-            pa[t.i], pa[t.j], pa[t.k], pb.span(), adjB, tol,
+            pa[t.i], pa[t.j], pa[t.k], pb.span(), adjB, tol, EveryPair{adjB},
             [&](std::size_t x, std::size_t y, std::size_t z) {
                 const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
                 const Vec3 to[3] = {pb[x], pb[y], pb[z]};
@@ -218,19 +268,33 @@ bool isPartOf(const MarkerModel& part, const MarkerModel& whole, const SminConfi
                     config.tolerance_mm);
 }
 
+SminWorkspace::SminWorkspace(std::size_t maxMarkers) {
+    const std::size_t markers = std::min(maxMarkers, MarkerSet::kCapacity);
+    pairs_.reserve(markers * (markers > 0 ? markers - 1 : 0));
+}
+
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {
+    SminWorkspace workspace;
+    computeSmin(models, config, workspace);
+}
+
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
+                 SminWorkspace& workspace) {
     // Largest ambiguous set per model, kept in sMin until the end.
     for (MarkerModel& m : models) {
         m.sMin = 0;
         m.sameShapeAs = -1;
     }
     Adjacency adjA, adjB;
+    SminWorkspace::PairList& pairsB = workspace.pairs_;
     for (std::size_t a = 0; a < models.size(); ++a) {
         buildAdjacency(models[a], adjA);
         for (std::size_t b = a; b < models.size(); ++b) {
             buildAdjacency(models[b], adjB);
+            sortPairs(models[b], adjB, pairsB);
             const bool self = a == b;
-            const std::size_t l = largestCongruence(models[a], adjA, models[b], adjB, self, config);
+            const std::size_t l =
+                largestCongruence(models[a], adjA, models[b], adjB, pairsB, self, config);
             const double smaller = static_cast<double>(
                 std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size()));
             if (!self && static_cast<double>(l) >= config.sameShapeShare * smaller) {

@@ -5,9 +5,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/bounded_vector.hpp"
 #include "core/geometry.hpp"
+#include "core/marker_set.hpp"
 #include "core/rigid_transform.hpp"
 
 namespace edgetrack {
@@ -63,6 +65,29 @@ struct SminConfig {
 };
 
 /**
+ * \brief Working storage of computeSmin: every co-visible pair of one model, sorted by length.
+ * Sized once for models of up to \a maxMarkers markers; a computeSmin given one allocates nothing
+ * for such models (a larger model makes it grow).
+ */
+class SminWorkspace {
+public:
+    explicit SminWorkspace(std::size_t maxMarkers = MarkerSet::kCapacity);
+
+    /// One ordered pair of a model's markers and its length (mm).
+    struct Pair {
+        float length_mm;
+        std::uint8_t x;
+        std::uint8_t y;
+    };
+    using PairList = std::vector<Pair>;
+
+private:
+    friend void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
+                            SminWorkspace& workspace);
+    PairList pairs_;
+};
+
+/**
  * \brief Set every model's S_min (and sameShapeAs) from its congruences with itself and the others.
  *
  * For every pair of co-visible triangles, of one model and of itself or another model, whose sides
@@ -73,8 +98,12 @@ struct SminConfig {
  * almost entirely are copies of one layout (two identical cubes): they are marked as the same
  * shape and left out of each other's S_min, since no number of markers tells them apart.
  *
- * Runs once at the end of a calibration; its cost grows with the triangles of each model.
+ * Runs once at the end of a calibration; its cost grows with the triangles of each model times
+ * the congruent pairs of the other, which are found by a binary search in \a workspace.
  */
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWorkspace& workspace);
+
+/// \brief computeSmin with a workspace of its own (allocated for the call).
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config);
 
 /**

@@ -37,6 +37,7 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , seenApartWords_((config.maxObjects + 63) / 64)
     , extentCentre_(config.maxObjects)
     , extentRadius_(config.maxObjects)
+    , sminWorkspace_(stride_)
     , edgeAlpha_(2.0 / (config.edgeWindow_frames + 1.0)) {
     objects_.resize(config.maxObjects);
     for (Object& o : objects_) {
@@ -372,7 +373,7 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
             }
         ++count;
     }
-    computeSmin(out.first(count), config_.smin);
+    computeSmin(out.first(count), config_.smin, sminWorkspace_);
     return count;
 }
 

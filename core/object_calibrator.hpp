@@ -404,6 +404,8 @@ private:
     /// established members when it is posed and in view, else a negative radius.
     BoundedVector<Vec3> extentCentre_;
     BoundedVector<double> extentRadius_;
+    /// Scratch of exportModels' S_min (mutable: exporting changes nothing the calibrator knows).
+    mutable SminWorkspace sminWorkspace_;
     /// Round-robin start of the shape searches of mergeDuplicates, one per check.
     std::size_t nextShapeSearch_ = 0;
     std::uint32_t stampValue_ = 0;

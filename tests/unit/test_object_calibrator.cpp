@@ -203,6 +203,14 @@ TEST_F(TwoBodies, NoHeapAllocationPerFrameAfterWarmUp) {
     });
     EXPECT_EQ(allocations, 0u);
     EXPECT_EQ(calibrator.counters().frames, 1200u);
+
+    // Exporting (S_min included) works in storage sized at construction too.
+    std::vector<MarkerModel> models;
+    for (std::size_t i = 0; i < config.maxObjects; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    std::size_t exported = 0;
+    EXPECT_EQ(test::countAllocations([&] { exported = calibrator.exportModels(models); }), 0u);
+    EXPECT_EQ(exported, 2u);
 }
 
 TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
