@@ -78,6 +78,7 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     if (!valid_)
         return;
     moments_ = std::make_unique<Moments[]>(config.maxLabels);
+    candidates_ = BoundedVector<Candidate>(config.maxLabels);
     labels_ = DisjointSets(config.maxLabels);
     // At most one run per two pixels of a row.
     const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
@@ -168,7 +169,7 @@ void BlobDetector::finishRow() {
 }
 
 void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
-                          BoundedVectorView<Blob>& out) {
+                          BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     out.clear();
     ++counters_.images;
     if (!valid_)
@@ -267,10 +268,11 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     }
     if (labelsExhausted_)
         ++counters_.labelOverflow;
-    emitBlobs(out);
+    emitBlobs(out, expected_px);
 }
 
-void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out) {
+void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
+    candidates_.clear();
     for (std::size_t label = 0; label < labels_.size(); ++label) {
         if (!labels_.isRoot(label))
             continue;
@@ -301,21 +303,56 @@ void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out) {
             ++counters_.rejectedNotRound;
             continue;
         }
-        Blob* blob = out.append();
-        if (blob == nullptr) {
+        Candidate* const candidate = candidates_.append(); // it holds as many as there are labels
+        if (candidate == nullptr) {
             ++counters_.blobOverflow;
             continue;
         }
+        Candidate& c = *candidate;
+        Blob& blob = c.blob;
         const double weight = static_cast<double>(m.sumI);
-        blob->centre_px = {static_cast<double>(m.sumIx) / weight,
-                           static_cast<double>(m.sumIy) / weight};
-        blob->area_px = static_cast<float>(n);
-        blob->elongation = static_cast<float>(elongation);
-        blob->left = static_cast<std::uint16_t>(m.left);
-        blob->right = static_cast<std::uint16_t>(m.right);
-        blob->top = static_cast<std::uint16_t>(m.top);
-        blob->bottom = static_cast<std::uint16_t>(m.bottom);
-        blob->peak = static_cast<std::uint8_t>(m.peak);
+        blob.centre_px = {static_cast<double>(m.sumIx) / weight,
+                          static_cast<double>(m.sumIy) / weight};
+        blob.area_px = static_cast<float>(n);
+        blob.elongation = static_cast<float>(elongation);
+        blob.left = static_cast<std::uint16_t>(m.left);
+        blob.right = static_cast<std::uint16_t>(m.right);
+        blob.top = static_cast<std::uint16_t>(m.top);
+        blob.bottom = static_cast<std::uint16_t>(m.bottom);
+        blob.peak = static_cast<std::uint8_t>(m.peak);
+        c.order = static_cast<std::uint32_t>(label);
+    }
+
+    const std::size_t room = out.capacity();
+    if (candidates_.size() > room) {
+        // More than fit: the blobs near an expected centre first (nearest first), then the
+        // roundest; labels break ties, so the choice is a function of the image alone.
+        counters_.blobOverflow += candidates_.size() - room;
+        const double near2 = config_.keepNear_px * config_.keepNear_px;
+        for (Candidate& c : candidates_) {
+            double nearest2 = near2;
+            for (const Vec2& e : expected_px)
+                nearest2 = std::min(nearest2, (c.blob.centre_px - e).squaredNorm());
+            c.group = nearest2 < near2 ? 0 : 1;
+            c.key = c.group == 0 ? nearest2 : static_cast<double>(c.blob.elongation);
+        }
+        const auto before = [](const Candidate& a, const Candidate& b) {
+            if (a.group != b.group)
+                return a.group < b.group;
+            if (a.key != b.key)
+                return a.key < b.key;
+            return a.order < b.order;
+        };
+        const auto kept = candidates_.begin() + static_cast<std::ptrdiff_t>(room);
+        std::nth_element(candidates_.begin(), kept, candidates_.end(), before);
+        // Out in the order their top rows appear, as when all fit.
+        std::sort(candidates_.begin(), kept,
+                  [](const Candidate& a, const Candidate& b) { return a.order < b.order; });
+        while (candidates_.size() > room)
+            candidates_.pop_back();
+    }
+    for (const Candidate& c : candidates_) {
+        *out.append() = c.blob;
         ++counters_.accepted;
     }
 }

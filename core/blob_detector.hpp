@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <span>
 
 #include "core/bounded_vector.hpp"
 #include "core/disjoint_sets.hpp"
@@ -25,6 +26,10 @@ struct BlobDetectorConfig {
     double minFill = 0.75;
     /// Blobs kept per image; more are counted as overflow.
     std::size_t maxBlobs = 256;
+    /// When more blobs pass than maxBlobs, those within this distance (px) of an expected centre
+    /// (where a tracked marker was a frame ago) are kept first, then the roundest: a burst of
+    /// reflections then costs the stray blobs, not the markers being tracked.
+    double keepNear_px = 12.0;
     /// Connected-component labels per image; a flood of specks beyond this is counted, not stored.
     std::size_t maxLabels = 4096;
 
@@ -75,8 +80,11 @@ public:
      * \brief Detect the blobs of one image.
      * \param pixels first row; rows are \a stride_bytes apart and width_px wide.
      * \param out cleared, then filled with accepted blobs in the order their top rows appear.
+     * \param expected_px where blobs are expected (raw pixels, e.g. tracked markers a frame ago):
+     * when more blobs pass than out holds, those near one are kept first (keepNear_px).
      */
-    void detect(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out);
+    void detect(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
+                std::span<const Vec2> expected_px = {});
 
     const BlobCounters& counters() const { return counters_; }
     const BlobDetectorConfig& config() const { return config_; }
@@ -90,7 +98,7 @@ private:
     int unite(int a, int b);
     void closeRun(int y, int x0, int x1, const std::uint8_t* row);
     void finishRow();
-    void emitBlobs(BoundedVectorView<Blob>& out);
+    void emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px);
 
     BlobDetectorConfig config_;
     int width_;
@@ -101,6 +109,17 @@ private:
     std::unique_ptr<Moments[]> moments_;
     DisjointSets labels_{0};
     bool labelsExhausted_ = false;
+
+    /// Blobs that passed the tests, before the choice of which fit in the output.
+    struct Candidate {
+        Blob blob;
+        /// Order of the choice: 0 for a blob near an expected centre, then its distance (px);
+        /// 1 for any other, then its elongation.
+        int group = 1;
+        double key = 0.0;
+        std::uint32_t order = 0;
+    };
+    BoundedVector<Candidate> candidates_;
 
     std::unique_ptr<Run[]> previousRuns_;
     std::unique_ptr<Run[]> currentRuns_;

@@ -2,6 +2,8 @@
 // points.
 #include "core/marker_pipeline.hpp"
 
+#include <optional>
+
 namespace edgetrack {
 
 MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig& config)
@@ -11,6 +13,8 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , detectors_{BlobDetector(config.blobs, width_px_, height_px_),
                  BlobDetector(config.blobs, width_px_, height_px_)}
     , blobs_{BoundedVector<Blob>(config.blobs.maxBlobs), BoundedVector<Blob>(config.blobs.maxBlobs)}
+    , expected_px_{BoundedVector<Vec2>(config.blobs.maxBlobs),
+                   BoundedVector<Vec2>(config.blobs.maxBlobs)}
     , stereo_(rig, config.stereo, config.blobs.maxBlobs)
     , markers_(config.stereo.maxMarkers)
     , points_rig_mm_(config.stereo.maxMarkers) {
@@ -24,7 +28,20 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
 }
 
 void MarkerPipeline::detectBlobs(int camera, const std::uint8_t* pixels, int stride_bytes) {
-    detectors_[index(camera)].detect(pixels, stride_bytes, blobs_[index(camera)]);
+    detectors_[index(camera)].detect(pixels, stride_bytes, blobs_[index(camera)],
+                                     expected_px_[index(camera)].span());
+}
+
+void MarkerPipeline::clearExpected() {
+    for (BoundedVector<Vec2>& expected : expected_px_)
+        expected.clear();
+}
+
+void MarkerPipeline::expect(const Vec3& marker_rig_mm) {
+    for (std::size_t camera = 0; camera < 2; ++camera)
+        if (const std::optional<Vec2> pixel =
+                stereo_.rig().camera(static_cast<int>(camera)).project(marker_rig_mm))
+            expected_px_[camera].push_back(*pixel);
 }
 
 void MarkerPipeline::matchStereo(StereoMethod method) {
@@ -50,9 +67,10 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
     for (std::size_t camera = 0; camera < 2; ++camera) {
         c.rejectedNotRound += detectors_[camera].counters().rejectedNotRound;
         c.labelOverflow += detectors_[camera].counters().labelOverflow;
-        // The blob vectors count every refused blob, from the detector and from outside alike
-        // (the detector's own counter sees the same refusals, so adding it would count twice).
-        c.blobOverflow += blobs_[camera].overflowCount();
+        // The detector chooses which blobs fit and counts the rest; the blob vectors count blobs
+        // given from outside (blobs level) that did not fit.
+        c.blobOverflow +=
+            detectors_[camera].counters().blobOverflow + blobs_[camera].overflowCount();
     }
     c.markerOverflow = stereo_.counters().markerOverflow;
     return c;

@@ -63,6 +63,15 @@ public:
     /// \brief Pair blobs(0) with blobs(1) and triangulate: markers() and points_rig_mm().
     void matchStereo(StereoMethod method = StereoMethod::Svd);
 
+    /// \brief Expect no blob in particular in the next images (see expect()).
+    void clearExpected();
+    /**
+     * \brief Expect a blob where a marker at \a marker_rig_mm (rig frame, mm) appears in each
+     * image: when an image has more blobs than room, those near an expected place
+     * (BlobDetectorConfig::keepNear_px) are kept first. Places beyond maxBlobs are not kept.
+     */
+    void expect(const Vec3& marker_rig_mm);
+
     /// \brief Both images in, 3D markers (rig frame, mm) out.
     std::span<const Vec3> process(const std::uint8_t* pixels0, int stride0_bytes,
                                   const std::uint8_t* pixels1, int stride1_bytes);
@@ -90,6 +99,8 @@ private:
     int height_px_;
     std::array<BlobDetector, 2> detectors_;
     std::array<BoundedVector<Blob>, 2> blobs_;
+    /// Per camera, where blobs are expected (raw px): see expect().
+    std::array<BoundedVector<Vec2>, 2> expected_px_;
     StereoMatcher stereo_;
     BoundedVector<StereoMarker> markers_;
     BoundedVector<Vec3> points_rig_mm_;

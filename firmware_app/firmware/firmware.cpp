@@ -421,6 +421,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     last_.number = frame.number;
     last_.time_s = hal::toSeconds(frame.midExposure());
     if (state_ == FirmwareState::Calibrating) {
+        markers_.clearExpected();
         const SessionStep step = calibration_.update(last_.time_s, markers_.points_rig_mm());
         if (step == SessionStep::BufferFull)
             ++counters_.sessionFramesRefused;
@@ -428,6 +429,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
             finishCalibration(endReason(step));
     } else {
         tracker_->update(last_.time_s, markers_.points_rig_mm());
+        expectTrackedMarkers();
         outputs_.updatePoses(last_.time_s, tracker_->bodies());
     }
     const std::int64_t t3 = hostNanos();
@@ -449,6 +451,17 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
+}
+
+void Firmware::expectTrackedMarkers() {
+    // Every marker of a found body where its pose puts it now: next frame, a burst of reflections
+    // then costs stray blobs, not the tracked markers' (the found and the briefly hidden alike).
+    markers_.clearExpected();
+    const std::span<const TrackedBody> tracked = tracker_->bodies();
+    for (std::size_t b = 0; b < tracked.size() && b < models_.size(); ++b)
+        if (tracked[b].found())
+            for (const Vec3& m : models_[b].model.markers_model_mm)
+                markers_.expect(tracked[b].T_rig_from_model.apply(m));
 }
 
 void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,

@@ -172,6 +172,8 @@ private:
     void enqueue(const Queued& queued);
     void process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
                  std::int64_t acquiredHost_ns);
+    /// Tell the front end where the found bodies' markers are, to keep their blobs first.
+    void expectTrackedMarkers();
     void sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acquiredAt,
                      std::int64_t acquiredHost_ns);
     void enterDegraded(const char* why);

@@ -80,6 +80,7 @@ void readBlobs(Section& s, BlobDetectorConfig& b) {
     s.real("max_elongation", b.maxElongation, 1.0);
     s.real("min_fill", b.minFill, 0.0, 1.0);
     s.integer("max_blobs", b.maxBlobs, 1, 65535);
+    s.real("keep_near_px", b.keepNear_px, 0.0);
     s.integer("max_labels", b.maxLabels, 16, kMaxCount);
     s.require(b.maxArea_px >= b.minArea_px, "max_area_px", "must be >= min_area_px");
 }

@@ -1,4 +1,5 @@
 // Tests of the blob detector against truth and against a plain flood-fill reference.
+#include <algorithm>
 #include <queue>
 #include <random>
 
@@ -212,6 +213,51 @@ TEST(BlobDetector, OverflowIsCountedNotWritten) {
     detector.detect(image.pixels.data(), image.width, blobs);
     EXPECT_EQ(blobs.size(), 150u);
     EXPECT_EQ(detector.counters().blobOverflow, 50u);
+}
+
+TEST(BlobDetector, WithMoreBlobsThanRoomKeepsTheExpectedThenTheRoundest) {
+    // 40 slightly oval discs at the top, 200 round ones below them and three discs where markers
+    // are expected, low in the image, with room for 100 blobs: the first 100 from the top would
+    // be the ovals and the first round rows.
+    Image image(640, 480);
+    std::vector<sim::Glint> spots;
+    for (int row = 0; row < 2; ++row)
+        for (int col = 0; col < 20; ++col) {
+            sim::Glint oval = disc(15.0 + col * 30.0, 15.0 + row * 30.0, 3.6);
+            oval.radiusMinor_px = 3.0;
+            spots.push_back(oval);
+        }
+    for (int row = 0; row < 10; ++row)
+        for (int col = 0; col < 20; ++col)
+            spots.push_back(disc(15.0 + col * 30.0, 75.0 + row * 30.0, 3.0));
+    const std::vector<Vec2> expected = {{100.0, 420.0}, {200.0, 440.0}, {300.0, 420.0}};
+    for (const Vec2& e : expected)
+        spots.push_back(disc(e.x() + 1.5, e.y() - 2.0, 3.0)); // moved a little since
+    drawSpots(image, spots);
+    BlobDetectorConfig config;
+    config.maxBlobs = 100;
+    BlobDetector detector(config, image.width, image.height);
+    BoundedVector<Blob> blobs(config.maxBlobs);
+    detector.detect(image.pixels.data(), image.width, blobs, expected);
+    ASSERT_EQ(blobs.size(), 100u);
+    EXPECT_EQ(detector.counters().blobOverflow, 143u);
+    for (const Vec2& e : expected) {
+        const bool kept = std::any_of(blobs.begin(), blobs.end(), [&](const Blob& b) {
+            return (b.centre_px - e).norm() < 4.0;
+        });
+        EXPECT_TRUE(kept) << "the blob expected near " << e.transpose();
+    }
+    // The rest are the round discs, none of the ovals, in the order of their top rows.
+    for (const Blob& b : blobs)
+        EXPECT_LT(b.elongation, 1.1F) << b.centre_px.transpose();
+    for (std::size_t i = 1; i < blobs.size(); ++i)
+        EXPECT_LE(blobs[i - 1].top, blobs[i].top);
+
+    // Without expectations, the expected ones are just round discs among the others.
+    BlobDetector plain(config, image.width, image.height);
+    plain.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(blobs.size(), 100u);
+    EXPECT_EQ(plain.counters().blobOverflow, 143u);
 }
 
 TEST(BlobDetector, FloodOfSpecksExhaustsLabelsSafely) {
