@@ -82,7 +82,9 @@ struct CompletionConfig {
         ModelTrackingConfig c;
         // Points of a session are noisier than the tracker's bench rig (0.3 mm at the far end).
         c.distanceTolerance_mm = 1.5;
-        c.searchBudget = 50000;
+        // Off the frame loop, a frame's search may take longer than on it: up to about 780
+        // hypotheses (at 1,024 checks each), which the noisy real Vicon recording needs.
+        c.searchBudget = 800000;
         // Three markers near their predicted places carry a pose on: a piece of an object is
         // followed while it turns out of view, so the markers that come into view join it.
         c.minTrackedMarkers = 3;
