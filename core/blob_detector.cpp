@@ -5,6 +5,8 @@
 #include <bit>
 #include <cmath>
 
+#include <Eigen/Cholesky>
+
 #include "core/simd/neon.hpp"
 
 namespace edgetrack {
@@ -34,6 +36,67 @@ inline uint8x16_t maximumOf(const std::uint8_t* row, int length) {
     }
     return vmaxq_u8(vmaxq_u8(m0, m1), vmaxq_u8(m2, m3));
 }
+/// A circle fitted to outline points (px): Kasa's algebraic fit, then Gauss-Newton on the
+/// geometric distances, which the algebraic fit biases on a partial arc.
+struct Circle {
+    Vec2 centre = Vec2::Zero();
+    double radius = 0.0;
+    double rms = 0.0;
+    bool valid = false;
+};
+
+Circle fitCircle(const Vec2* points, const std::uint8_t* use, std::size_t count) {
+    Circle c;
+    Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+        if (!use[i])
+            continue;
+        const Eigen::Vector3d row(points[i].x(), points[i].y(), 1.0);
+        normal += row * row.transpose();
+        rhs -= row * points[i].squaredNorm();
+        ++n;
+    }
+    if (n < 5)
+        return c;
+    const Eigen::Vector3d def = normal.ldlt().solve(rhs);
+    c.centre = Vec2(-0.5 * def.x(), -0.5 * def.y());
+    const double r2 = c.centre.squaredNorm() - def.z();
+    if (!(r2 > 0.0))
+        return c;
+    c.radius = std::sqrt(r2);
+    for (int iteration = 0; iteration < 5; ++iteration) {
+        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
+        for (std::size_t i = 0; i < count; ++i) {
+            if (!use[i])
+                continue;
+            const Vec2 d = points[i] - c.centre;
+            const double length = d.norm();
+            if (length < 1e-9)
+                continue;
+            const Eigen::Vector3d j(-d.x() / length, -d.y() / length, -1.0);
+            const double r = length - c.radius;
+            jtj += j * j.transpose();
+            jtr += j * r;
+        }
+        const Eigen::Vector3d step = jtj.ldlt().solve(-jtr);
+        c.centre += step.head<2>();
+        c.radius += step.z();
+        if (step.squaredNorm() < 1e-12)
+            break;
+    }
+    double sum2 = 0.0;
+    for (std::size_t i = 0; i < count; ++i)
+        if (use[i]) {
+            const double r = (points[i] - c.centre).norm() - c.radius;
+            sum2 += r * r;
+        }
+    c.rms = std::sqrt(sum2 / static_cast<double>(n));
+    c.valid = c.radius > 0.0 && std::isfinite(c.rms);
+    return c;
+}
 } // namespace
 
 // Sums over a component's pixels; exact integers, so merging components loses nothing.
@@ -43,8 +106,14 @@ struct BlobDetector::Moments {
     std::int64_t sumX = 0, sumY = 0, sumXX = 0, sumYY = 0, sumXY = 0;
     int left = 0, right = 0, top = 0, bottom = 0;
     int peak = 0;
+    /// One pixel of the component (the start of its first run): where splitIntoDiscs starts.
+    int seedX = 0, seedY = 0;
 
     void add(const Moments& o) {
+        if (count == 0) { // an empty label's bounds would otherwise take in the origin
+            *this = o;
+            return;
+        }
         count += o.count;
         sumI += o.sumI;
         sumIx += o.sumIx;
@@ -78,7 +147,13 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     if (!valid_)
         return;
     moments_ = std::make_unique<Moments[]>(config.maxLabels);
-    candidates_ = BoundedVector<Candidate>(config.maxLabels);
+    // A split blob gives up to three candidates in place of one.
+    candidates_ = BoundedVector<Candidate>(3 * config.maxLabels);
+    constexpr auto kSplitPixels = static_cast<std::size_t>(kSplitSide * kSplitSide);
+    splitMask_ = std::make_unique<std::uint8_t[]>(kSplitPixels);
+    splitDistance_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
+    splitStack_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
+    splitEdge_ = std::make_unique<Vec2[]>(kSplitPixels);
     labels_ = DisjointSets(config.maxLabels);
     // At most one run per two pixels of a row.
     const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
@@ -139,6 +214,8 @@ void BlobDetector::closeRun(int y, int x0, int x1, const std::uint8_t* row) {
     m.right = x1;
     m.top = m.bottom = y;
     m.peak = peak;
+    m.seedX = x0;
+    m.seedY = y;
 
     // 8-connectivity: a previous run touches this one if their x ranges overlap when widened by 1.
     // Runs of a row come left to right, so a previous run that ends before this one starts can
@@ -268,10 +345,22 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     }
     if (labelsExhausted_)
         ++counters_.labelOverflow;
-    emitBlobs(out, expected_px);
+    emitBlobs(pixels, stride_bytes, out, expected_px);
 }
 
-void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
+bool BlobDetector::addCandidate(const Blob& blob, std::uint32_t order) {
+    Candidate* const c = candidates_.append();
+    if (c == nullptr) {
+        ++counters_.blobOverflow;
+        return false;
+    }
+    c->blob = blob;
+    c->order = order;
+    return true;
+}
+
+void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
+                             BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     candidates_.clear();
     for (std::size_t label = 0; label < labels_.size(); ++label) {
         if (!labels_.isRoot(label))
@@ -299,17 +388,20 @@ void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2>
         const double elongation = std::sqrt(major / minor);
         // A uniform ellipse with these moments covers 4 pi sqrt(major * minor) pixels.
         const double fill = n / (4.0 * 3.14159265358979323846 * std::sqrt(major * minor));
+        // Candidates keep the order of their labels (top rows first); the parts of a split blob
+        // take the next three places.
+        const auto order = static_cast<std::uint32_t>(label) * 4U;
         if (elongation > config_.maxElongation || fill < config_.minFill) {
             ++counters_.rejectedNotRound;
+            if (config_.splitMerged) {
+                if (splitIntoDiscs(m, pixels, stride_bytes, order))
+                    ++counters_.splitBlobs;
+                else
+                    ++counters_.splitRefused;
+            }
             continue;
         }
-        Candidate* const candidate = candidates_.append(); // it holds as many as there are labels
-        if (candidate == nullptr) {
-            ++counters_.blobOverflow;
-            continue;
-        }
-        Candidate& c = *candidate;
-        Blob& blob = c.blob;
+        Blob blob;
         const double weight = static_cast<double>(m.sumI);
         blob.centre_px = {static_cast<double>(m.sumIx) / weight,
                           static_cast<double>(m.sumIy) / weight};
@@ -320,7 +412,7 @@ void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2>
         blob.top = static_cast<std::uint16_t>(m.top);
         blob.bottom = static_cast<std::uint16_t>(m.bottom);
         blob.peak = static_cast<std::uint8_t>(m.peak);
-        c.order = static_cast<std::uint32_t>(label);
+        addCandidate(blob, order);
     }
 
     const std::size_t room = out.capacity();
@@ -355,6 +447,217 @@ void BlobDetector::emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2>
         *out.append() = c.blob;
         ++counters_.accepted;
     }
+}
+
+bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
+                                  std::uint32_t order) {
+    // The blob on a grid of its bounding box with a frame of one pixel: a cut disc at the image's
+    // border is no disc to fit.
+    const int w = m.right - m.left + 1, h = m.bottom - m.top + 1;
+    if (w + 2 > kSplitSide || h + 2 > kSplitSide || m.left == 0 || m.top == 0 ||
+        m.right == width_ - 1 || m.bottom == height_ - 1)
+        return false;
+    const int gw = w + 2, gh = h + 2;
+    const auto cell = [gw](int gx, int gy) { return static_cast<std::size_t>(gy * gw + gx); };
+    const auto level = [&](int gx, int gy) {
+        return static_cast<int>(
+            pixels[static_cast<std::ptrdiff_t>(m.top - 1 + gy) * stride_bytes + (m.left - 1 + gx)]);
+    };
+    std::uint8_t* mask = splitMask_.get();
+    std::fill_n(mask, static_cast<std::size_t>(gw * gh), std::uint8_t{0});
+    // Its own pixels: 8-connected from its seed (another blob may reach into the box).
+    const int threshold = config_.threshold;
+    std::size_t stacked = 0;
+    const auto push = [&](int gx, int gy) {
+        if (gx < 1 || gy < 1 || gx > w || gy > h || mask[cell(gx, gy)] || level(gx, gy) < threshold)
+            return;
+        mask[cell(gx, gy)] = 1;
+        splitStack_[stacked++] = static_cast<std::uint16_t>(cell(gx, gy));
+    };
+    push(m.seedX - m.left + 1, m.seedY - m.top + 1);
+    while (stacked > 0) {
+        const int at = splitStack_[--stacked];
+        const int gx = at % gw, gy = at / gw;
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx)
+                push(gx + dx, gy + dy);
+    }
+
+    // Chamfer distance to the outside (3 a step, 4 a diagonal step): a disc's centre is a peak.
+    std::uint16_t* distance = splitDistance_.get();
+    for (int gy = 0; gy < gh; ++gy)
+        for (int gx = 0; gx < gw; ++gx)
+            distance[cell(gx, gy)] = mask[cell(gx, gy)] ? std::uint16_t{0xFFFF} : std::uint16_t{0};
+    const auto relax = [&](int gx, int gy, int dx, int dy, int cost) {
+        std::uint16_t& d = distance[cell(gx, gy)];
+        d = static_cast<std::uint16_t>(std::min<int>(d, distance[cell(gx + dx, gy + dy)] + cost));
+    };
+    for (int gy = 1; gy <= h; ++gy)
+        for (int gx = 1; gx <= w; ++gx)
+            if (mask[cell(gx, gy)]) {
+                relax(gx, gy, -1, 0, 3);
+                relax(gx, gy, 0, -1, 3);
+                relax(gx, gy, -1, -1, 4);
+                relax(gx, gy, 1, -1, 4);
+            }
+    for (int gy = h; gy >= 1; --gy)
+        for (int gx = w; gx >= 1; --gx)
+            if (mask[cell(gx, gy)]) {
+                relax(gx, gy, 1, 0, 3);
+                relax(gx, gy, 0, 1, 3);
+                relax(gx, gy, 1, 1, 4);
+                relax(gx, gy, -1, 1, 4);
+            }
+
+    // Disc centres: peaks of the distance, strongest first, each outside the discs already taken.
+    struct Peak {
+        Vec2 at;
+        int depth;
+    };
+    FixedVector<Peak, 4> discs;
+    for (int round = 0; round < 4; ++round) {
+        Peak best{Vec2::Zero(), 0};
+        for (int gy = 1; gy <= h; ++gy)
+            for (int gx = 1; gx <= w; ++gx) {
+                const int d = distance[cell(gx, gy)];
+                if (d <= best.depth || d < 4)
+                    continue;
+                bool peak = true;
+                for (int dy = -1; dy <= 1 && peak; ++dy)
+                    for (int dx = -1; dx <= 1 && peak; ++dx)
+                        peak = distance[cell(gx + dx, gy + dy)] <= d;
+                const Vec2 here(gx, gy);
+                for (const Peak& taken : discs)
+                    peak = peak && (here - taken.at).norm() * 3.0 > taken.depth + 1.5;
+                if (peak)
+                    best = {here, d};
+            }
+        if (best.depth == 0)
+            break;
+        discs.push_back(best);
+    }
+    if (discs.empty() || discs.size() > 3)
+        return false;
+
+    // Outline points: where the level crosses the threshold between a pixel of the blob and its
+    // outside neighbour, by linear interpolation. The outline of touching discs is arcs of each
+    // disc's own circle, concentric with it whatever the blur and the peak level.
+    Vec2* edge = splitEdge_.get();
+    std::size_t edges = 0;
+    const std::size_t edgeRoom = static_cast<std::size_t>(kSplitSide * kSplitSide);
+    for (int gy = 1; gy <= h; ++gy)
+        for (int gx = 1; gx <= w; ++gx) {
+            if (!mask[cell(gx, gy)])
+                continue;
+            const int inside = level(gx, gy);
+            const int steps[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+            for (const auto& step : steps) {
+                const int ox = gx + step[0], oy = gy + step[1];
+                if (mask[cell(ox, oy)] || edges == edgeRoom)
+                    continue;
+                const int outside = level(ox, oy);
+                const double t = inside > outside ? static_cast<double>(inside - threshold) /
+                                                        static_cast<double>(inside - outside)
+                                                  : 0.5;
+                edge[edges++] = Vec2(gx + t * step[0], gy + t * step[1]);
+            }
+        }
+
+    // The discs: a circle from each peak of the distance, then from the outline points that no
+    // circle explains yet (a smaller disc overlapping a larger one makes a shoulder, no peak).
+    // A disc's own points lie near its circle and away from the other discs, whose light adds up
+    // at the neck between them.
+    std::array<Circle, 3> circle{};
+    std::size_t count = 0;
+    std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
+    const auto ownPoint = [&](std::size_t i, std::size_t k, double tolerance) {
+        if (std::abs((edge[i] - circle[k].centre).norm() - circle[k].radius) > tolerance)
+            return false;
+        for (std::size_t j = 0; j < count; ++j)
+            if (j != k && (edge[i] - circle[j].centre).norm() <= circle[j].radius + 1.0)
+                return false;
+        return true;
+    };
+    const auto refit = [&](std::size_t k) {
+        for (int pass = 0; pass < 3; ++pass) {
+            for (std::size_t i = 0; i < edges; ++i)
+                use[i] = ownPoint(i, k, 1.0) ? 1 : 0;
+            const Circle fitted = fitCircle(edge, use, edges);
+            if (!fitted.valid)
+                return false;
+            circle[k] = fitted;
+        }
+        return true;
+    };
+    for (const Peak& peak : discs) {
+        circle[count].centre = peak.at;
+        circle[count].radius = peak.depth / 3.0 + 0.5;
+        ++count;
+        if (!refit(count - 1))
+            --count;
+    }
+    while (count > 0 && count < 3) {
+        std::size_t left = 0;
+        for (std::size_t i = 0; i < edges; ++i) {
+            bool explained = false;
+            for (std::size_t k = 0; k < count && !explained; ++k)
+                explained = (edge[i] - circle[k].centre).norm() <= circle[k].radius + 1.0;
+            use[i] = explained ? 0 : 1;
+            left += explained ? 0U : 1U;
+        }
+        if (left < 8)
+            break;
+        const Circle fitted = fitCircle(edge, use, edges);
+        if (!fitted.valid || fitted.radius < 1.0 || fitted.radius > kSplitSide)
+            break;
+        circle[count++] = fitted;
+        if (!refit(count - 1)) {
+            --count;
+            break;
+        }
+    }
+    if (count < 2)
+        return false;
+    for (std::size_t k = 0; k < count; ++k)
+        if (!refit(k))
+            return false;
+
+    // A part is kept when its circle rests on points all round at least half of it and fits them.
+    std::array<bool, 3> trusted{};
+    std::size_t parts = 0;
+    for (std::size_t k = 0; k < count; ++k) {
+        Vec2 resultant = Vec2::Zero();
+        std::size_t n = 0;
+        for (std::size_t i = 0; i < edges; ++i)
+            if (ownPoint(i, k, 1.0)) {
+                resultant += (edge[i] - circle[k].centre).normalized();
+                ++n;
+            }
+        trusted[k] = n >= 8 && resultant.norm() < 0.7 * static_cast<double>(n) &&
+                     circle[k].rms <= kSplitFitRms_px && circle[k].radius >= 1.0;
+        parts += trusted[k] ? 1U : 0U;
+    }
+    if (parts == 0)
+        return false;
+    for (std::size_t k = 0; k < count; ++k) {
+        if (!trusted[k])
+            continue;
+        const double radius = circle[k].radius;
+        Blob part;
+        part.centre_px = {circle[k].centre.x() + m.left - 1, circle[k].centre.y() + m.top - 1};
+        part.area_px = static_cast<float>(3.14159265358979323846 * radius * radius);
+        part.elongation = 1.0F;
+        part.left = static_cast<std::uint16_t>(m.left);
+        part.right = static_cast<std::uint16_t>(m.right);
+        part.top = static_cast<std::uint16_t>(m.top);
+        part.bottom = static_cast<std::uint16_t>(m.bottom);
+        part.peak = static_cast<std::uint8_t>(m.peak);
+        part.split = true;
+        part.fitRms_px = static_cast<float>(circle[k].rms);
+        addCandidate(part, order + 1 + static_cast<std::uint32_t>(k));
+    }
+    counters_.splitParts += parts;
+    return parts > 0;
 }
 
 } // namespace edgetrack

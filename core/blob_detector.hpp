@@ -24,6 +24,9 @@ struct BlobDetectorConfig {
     double maxElongation = 1.35;
     /// Smallest share of the moment ellipse that the blob fills; merged markers leave gaps.
     double minFill = 0.75;
+    /// A blob that fails those two tests is split into the two or three discs it is made of,
+    /// each centred by a circle fitted to its own part of the outline (see BlobDetector).
+    bool splitMerged = true;
     /// Blobs kept per image; more are counted as overflow.
     std::size_t maxBlobs = 256;
     /// When more blobs pass than maxBlobs, those within this distance (px) of an expected centre
@@ -46,6 +49,11 @@ struct Blob {
     float elongation = 1.0f;
     std::uint16_t left = 0, top = 0, right = 0, bottom = 0;
     std::uint8_t peak = 0;
+    /// Part of a blob of two or three touching discs: its centre is the fit of a circle to its own
+    /// part of the outline, and left..bottom are those of the whole blob.
+    bool split = false;
+    /// For a split part, the RMS distance of its outline points from the fitted circle (px).
+    float fitRms_px = 0.0f;
 };
 
 /// \brief Per-detector counters for the status view (cumulative).
@@ -55,6 +63,9 @@ struct BlobCounters {
     std::uint64_t rejectedSmall = 0;
     std::uint64_t rejectedLarge = 0;
     std::uint64_t rejectedNotRound = 0;
+    std::uint64_t splitBlobs = 0;   ///< blobs of touching discs split into their discs
+    std::uint64_t splitParts = 0;   ///< discs those gave
+    std::uint64_t splitRefused = 0; ///< blobs not round that could not be split with confidence
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
 };
@@ -98,7 +109,13 @@ private:
     int unite(int a, int b);
     void closeRun(int y, int x0, int x1, const std::uint8_t* row);
     void finishRow();
-    void emitBlobs(BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px);
+    void emitBlobs(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
+                   std::span<const Vec2> expected_px);
+    /// Split a blob that is not round into the two or three discs it is made of, as candidates
+    /// (those that can be centred with confidence); false when none can.
+    bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
+                        std::uint32_t order);
+    bool addCandidate(const Blob& blob, std::uint32_t order);
 
     BlobDetectorConfig config_;
     int width_;
@@ -120,6 +137,14 @@ private:
         std::uint32_t order = 0;
     };
     BoundedVector<Candidate> candidates_;
+    /// Scratch of splitIntoDiscs, for a bounding box of at most kSplitSide x kSplitSide pixels.
+    static constexpr int kSplitSide = 64;
+    /// A split part's circle must fit its outline points this well (px RMS).
+    static constexpr double kSplitFitRms_px = 0.3;
+    std::unique_ptr<std::uint8_t[]> splitMask_;
+    std::unique_ptr<std::uint16_t[]> splitDistance_;
+    std::unique_ptr<std::uint16_t[]> splitStack_;
+    std::unique_ptr<Vec2[]> splitEdge_;
 
     std::unique_ptr<Run[]> previousRuns_;
     std::unique_ptr<Run[]> currentRuns_;

@@ -66,6 +66,8 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
     MarkerPipelineCounters c;
     for (std::size_t camera = 0; camera < 2; ++camera) {
         c.rejectedNotRound += detectors_[camera].counters().rejectedNotRound;
+        c.splitBlobs += detectors_[camera].counters().splitBlobs;
+        c.splitRefused += detectors_[camera].counters().splitRefused;
         c.labelOverflow += detectors_[camera].counters().labelOverflow;
         // The detector chooses which blobs fit and counts the rest; the blob vectors count blobs
         // given from outside (blobs level) that did not fit.

@@ -25,6 +25,9 @@ struct MarkerPipelineConfig {
 /// \brief What the front end refused for want of room or shape, summed over both cameras.
 struct MarkerPipelineCounters {
     std::uint64_t rejectedNotRound = 0;
+    /// Blobs not round that were split into their discs, and those that could not be.
+    std::uint64_t splitBlobs = 0;
+    std::uint64_t splitRefused = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;

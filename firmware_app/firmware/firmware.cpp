@@ -448,6 +448,8 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
 
     const MarkerPipelineCounters refused = markers_.counters();
     counters_.blobOverflow = refused.blobOverflow;
+    counters_.blobsSplit = refused.splitBlobs;
+    counters_.blobsNotSplit = refused.splitRefused;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -545,6 +547,8 @@ std::string Firmware::statusReport() const {
     row("camera restarts", c.cameraRestarts);
     row("strobe pulses refused", c.strobePulsesRefused + board_.ledRing.droppedPulses());
     row("blobs refused (capacity)", c.blobOverflow);
+    row("blobs of touching markers split", c.blobsSplit);
+    row("blobs not round, not split", c.blobsNotSplit);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

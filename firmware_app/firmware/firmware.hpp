@@ -68,6 +68,9 @@ struct FirmwareCounters {
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;
+    /// Blobs of touching markers split into their discs, and those that could not be.
+    std::uint64_t blobsSplit = 0;
+    std::uint64_t blobsNotSplit = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;

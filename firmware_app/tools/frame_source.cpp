@@ -193,6 +193,7 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
     const MarkerPipelineCounters refused = pipeline.counters();
     summary.blobOverflow = refused.blobOverflow;
     summary.rejectedNotRound = refused.rejectedNotRound;
+    summary.splitBlobs = refused.splitBlobs;
     summary.markerOverflow = refused.markerOverflow;
     return summary;
 }

@@ -36,6 +36,7 @@ struct FrameSourceSummary {
     std::uint64_t blobs = 0;
     std::uint64_t points = 0;
     std::uint64_t rejectedNotRound = 0;
+    std::uint64_t splitBlobs = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t markerOverflow = 0;
     /// The recording's rig.toml, when it has one (a .c3d file has none).

@@ -83,7 +83,8 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
 
     summary << "edgetrack reconstruct: " << read->frames << " frames from " << read->level << ", "
             << blobRows.size() << " blobs, " << pointRows.size() << " markers; rejected blobs "
-            << read->rejectedNotRound << " not round; blob overflow " << read->blobOverflow
+            << read->rejectedNotRound << " not round (" << read->splitBlobs
+            << " of them split into their discs); blob overflow " << read->blobOverflow
             << ", marker overflow " << read->markerOverflow << "\n"
             << "  settings: " << options.settings.source << "\n";
     return Ok{};

@@ -241,17 +241,17 @@ TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
     sim->cameras.setSpuriousBurst(500);
     // 500 reflections per image against 256 blobs kept: the rest are counted, not stored. The
     // blobs where the tracked markers are expected are kept first (the first 256 from the top of
-    // the image, as before, found both cubes in none of the burst frames). What still loses a
-    // marker is a reflection that touches it: the two make one blob that is not round (issue 22:
-    // 61 of 100 frames with both, the second cube being in view with only four markers).
-    // bench_firmware measures what the burst costs.
+    // the image, as before, found both cubes in none of the burst frames), and a reflection that
+    // touches a marker no longer takes it with it: their blob is split into its discs (without
+    // the split, 61 of 100 frames had both cubes; with it, 93; the second cube is in view with
+    // only four markers). bench_firmware measures what the burst costs.
     int bothFound = 0;
     for (int f = 0; f < kBurstFrames; ++f) {
         runFrames(firmware, 1);
         bothFound += firmware.bodies()[0].found() && firmware.bodies()[1].found() ? 1 : 0;
     }
     sim->cameras.setSpuriousBurst(0);
-    EXPECT_GE(bothFound, kBurstFrames / 2) << "of " << kBurstFrames << " burst frames";
+    EXPECT_GE(bothFound, kBurstFrames * 8 / 10) << "of " << kBurstFrames << " burst frames";
     EXPECT_GE(firmware.counters().blobOverflow, kBurstFrames * 2u * 200u);
     EXPECT_EQ(firmware.counters().framesProcessed, 100u + kBurstFrames)
         << "no frame lost to the burst";
