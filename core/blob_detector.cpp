@@ -149,6 +149,7 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     moments_ = std::make_unique<Moments[]>(config.maxLabels);
     // A split blob gives up to three candidates in place of one.
     candidates_ = BoundedVector<Candidate>(3 * config.maxLabels);
+    notRound_ = BoundedVector<std::uint32_t>(config.maxLabels);
     constexpr auto kSplitPixels = static_cast<std::size_t>(kSplitSide * kSplitSide);
     splitMask_ = std::make_unique<std::uint8_t[]>(kSplitPixels);
     splitDistance_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
@@ -362,6 +363,7 @@ bool BlobDetector::addCandidate(const Blob& blob, std::uint32_t order) {
 void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
                              BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     candidates_.clear();
+    notRound_.clear();
     for (std::size_t label = 0; label < labels_.size(); ++label) {
         if (!labels_.isRoot(label))
             continue;
@@ -393,12 +395,8 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const auto order = static_cast<std::uint32_t>(label) * 4U;
         if (elongation > config_.maxElongation || fill < config_.minFill) {
             ++counters_.rejectedNotRound;
-            if (config_.splitMerged) {
-                if (splitIntoDiscs(m, pixels, stride_bytes, order))
-                    ++counters_.splitBlobs;
-                else
-                    ++counters_.splitRefused;
-            }
+            if (config_.splitMerged)
+                notRound_.push_back(static_cast<std::uint32_t>(label));
             continue;
         }
         Blob blob;
@@ -415,18 +413,41 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         addCandidate(blob, order);
     }
 
+    // Blobs of touching discs split into their discs, after the round ones: when those already
+    // fill the room (a burst of reflections), only the blobs near an expected marker are worth
+    // the work, as only they could take a place.
+    const double near2 = config_.keepNear_px * config_.keepNear_px;
+    const bool crowded = candidates_.size() >= out.capacity();
+    for (const std::uint32_t label : notRound_) {
+        const Moments& m = moments_[label];
+        const Vec2 centre(static_cast<double>(m.sumX) / static_cast<double>(m.count),
+                          static_cast<double>(m.sumY) / static_cast<double>(m.count));
+        const bool expected =
+            std::any_of(expected_px.begin(), expected_px.end(), [&](const Vec2& e) {
+                return (e - centre).squaredNorm() < near2 + 0.25 * static_cast<double>(m.count);
+            });
+        if (crowded && !expected)
+            continue;
+        if (splitIntoDiscs(m, pixels, stride_bytes, label * 4U))
+            ++counters_.splitBlobs;
+        else
+            ++counters_.splitRefused;
+    }
+
     const std::size_t room = out.capacity();
     if (candidates_.size() > room) {
         // More than fit: the blobs near an expected centre first (nearest first), then the
         // roundest; labels break ties, so the choice is a function of the image alone.
         counters_.blobOverflow += candidates_.size() - room;
-        const double near2 = config_.keepNear_px * config_.keepNear_px;
         for (Candidate& c : candidates_) {
             double nearest2 = near2;
             for (const Vec2& e : expected_px)
                 nearest2 = std::min(nearest2, (c.blob.centre_px - e).squaredNorm());
             c.group = nearest2 < near2 ? 0 : 1;
-            c.key = c.group == 0 ? nearest2 : static_cast<double>(c.blob.elongation);
+            // Split parts rank after the round blobs: their circles are round by construction.
+            c.key = c.group == 0   ? nearest2
+                    : c.blob.split ? config_.maxElongation + static_cast<double>(c.blob.fitRms_px)
+                                   : static_cast<double>(c.blob.elongation);
         }
         const auto before = [](const Candidate& a, const Candidate& b) {
             if (a.group != b.group)

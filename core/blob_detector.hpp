@@ -137,6 +137,8 @@ private:
         std::uint32_t order = 0;
     };
     BoundedVector<Candidate> candidates_;
+    /// Labels of this image's blobs that are not round, to be split once the round ones are known.
+    BoundedVector<std::uint32_t> notRound_;
     /// Scratch of splitIntoDiscs, for a bounding box of at most kSplitSide x kSplitSide pixels.
     static constexpr int kSplitSide = 64;
     /// A split part's circle must fit its outline points this well (px RMS).

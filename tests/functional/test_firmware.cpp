@@ -243,7 +243,7 @@ TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
     // blobs where the tracked markers are expected are kept first (the first 256 from the top of
     // the image, as before, found both cubes in none of the burst frames), and a reflection that
     // touches a marker no longer takes it with it: their blob is split into its discs (without
-    // the split, 61 of 100 frames had both cubes; with it, 93; the second cube is in view with
+    // the split, 61 of 100 frames had both cubes; with it, 92; the second cube is in view with
     // only four markers). bench_firmware measures what the burst costs.
     int bothFound = 0;
     for (int f = 0; f < kBurstFrames; ++f) {
