@@ -349,6 +349,28 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
     emitBlobs(pixels, stride_bytes, out, expected_px);
 }
 
+namespace {
+
+/// Squared distance (px^2) from \a centre to the nearest of \a expected_px, at most \a limit2.
+double nearestExpected2(const Vec2& centre, std::span<const Vec2> expected_px, double limit2) {
+    double nearest2 = limit2;
+    for (const Vec2& e : expected_px)
+        nearest2 = std::min(nearest2, (centre - e).squaredNorm());
+    return nearest2;
+}
+
+} // namespace
+
+Blob BlobDetector::framedBlob(const Moments& m) {
+    Blob blob;
+    blob.left = static_cast<std::uint16_t>(m.left);
+    blob.right = static_cast<std::uint16_t>(m.right);
+    blob.top = static_cast<std::uint16_t>(m.top);
+    blob.bottom = static_cast<std::uint16_t>(m.bottom);
+    blob.peak = static_cast<std::uint8_t>(m.peak);
+    return blob;
+}
+
 bool BlobDetector::addCandidate(const Blob& blob, std::uint32_t order) {
     Candidate* const c = candidates_.append();
     if (c == nullptr) {
@@ -399,17 +421,12 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
                 notRound_.push_back(static_cast<std::uint32_t>(label));
             continue;
         }
-        Blob blob;
+        Blob blob = framedBlob(m);
         const double weight = static_cast<double>(m.sumI);
         blob.centre_px = {static_cast<double>(m.sumIx) / weight,
                           static_cast<double>(m.sumIy) / weight};
         blob.area_px = static_cast<float>(n);
         blob.elongation = static_cast<float>(elongation);
-        blob.left = static_cast<std::uint16_t>(m.left);
-        blob.right = static_cast<std::uint16_t>(m.right);
-        blob.top = static_cast<std::uint16_t>(m.top);
-        blob.bottom = static_cast<std::uint16_t>(m.bottom);
-        blob.peak = static_cast<std::uint8_t>(m.peak);
         addCandidate(blob, order);
     }
 
@@ -422,10 +439,9 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const Moments& m = moments_[label];
         const Vec2 centre(static_cast<double>(m.sumX) / static_cast<double>(m.count),
                           static_cast<double>(m.sumY) / static_cast<double>(m.count));
-        const bool expected =
-            std::any_of(expected_px.begin(), expected_px.end(), [&](const Vec2& e) {
-                return (e - centre).squaredNorm() < near2 + 0.25 * static_cast<double>(m.count);
-            });
+        // A blob of two discs lies off either disc's centre by up to about its own size.
+        const double reach2 = near2 + 0.25 * static_cast<double>(m.count);
+        const bool expected = nearestExpected2(centre, expected_px, reach2) < reach2;
         if (crowded && !expected)
             continue;
         if (splitIntoDiscs(m, pixels, stride_bytes, label * 4U))
@@ -440,9 +456,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         // roundest; labels break ties, so the choice is a function of the image alone.
         counters_.blobOverflow += candidates_.size() - room;
         for (Candidate& c : candidates_) {
-            double nearest2 = near2;
-            for (const Vec2& e : expected_px)
-                nearest2 = std::min(nearest2, (c.blob.centre_px - e).squaredNorm());
+            const double nearest2 = nearestExpected2(c.blob.centre_px, expected_px, near2);
             c.group = nearest2 < near2 ? 0 : 1;
             // Split parts rank after the round blobs: their circles are round by construction.
             c.key = c.group == 0   ? nearest2
@@ -591,18 +605,22 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::array<Circle, 3> circle{};
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
-    const auto ownPoint = [&](std::size_t i, std::size_t k, double tolerance) {
-        if (std::abs((edge[i] - circle[k].centre).norm() - circle[k].radius) > tolerance)
+    // Within a pixel of disc j's circle or inside it.
+    const auto byDisc = [&](std::size_t i, std::size_t j) {
+        return (edge[i] - circle[j].centre).norm() <= circle[j].radius + 1.0;
+    };
+    const auto ownPoint = [&](std::size_t i, std::size_t k) {
+        if (std::abs((edge[i] - circle[k].centre).norm() - circle[k].radius) > 1.0)
             return false;
         for (std::size_t j = 0; j < count; ++j)
-            if (j != k && (edge[i] - circle[j].centre).norm() <= circle[j].radius + 1.0)
+            if (j != k && byDisc(i, j))
                 return false;
         return true;
     };
     const auto refit = [&](std::size_t k) {
         for (int pass = 0; pass < 3; ++pass) {
             for (std::size_t i = 0; i < edges; ++i)
-                use[i] = ownPoint(i, k, 1.0) ? 1 : 0;
+                use[i] = ownPoint(i, k) ? 1 : 0;
             const Circle fitted = fitCircle(edge, use, edges);
             if (!fitted.valid)
                 return false;
@@ -622,7 +640,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         for (std::size_t i = 0; i < edges; ++i) {
             bool explained = false;
             for (std::size_t k = 0; k < count && !explained; ++k)
-                explained = (edge[i] - circle[k].centre).norm() <= circle[k].radius + 1.0;
+                explained = byDisc(i, k);
             use[i] = explained ? 0 : 1;
             left += explained ? 0U : 1U;
         }
@@ -650,7 +668,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         Vec2 resultant = Vec2::Zero();
         std::size_t n = 0;
         for (std::size_t i = 0; i < edges; ++i)
-            if (ownPoint(i, k, 1.0)) {
+            if (ownPoint(i, k)) {
                 resultant += (edge[i] - circle[k].centre).normalized();
                 ++n;
             }
@@ -664,15 +682,10 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         if (!trusted[k])
             continue;
         const double radius = circle[k].radius;
-        Blob part;
+        Blob part = framedBlob(m);
         part.centre_px = {circle[k].centre.x() + m.left - 1, circle[k].centre.y() + m.top - 1};
         part.area_px = static_cast<float>(3.14159265358979323846 * radius * radius);
         part.elongation = 1.0F;
-        part.left = static_cast<std::uint16_t>(m.left);
-        part.right = static_cast<std::uint16_t>(m.right);
-        part.top = static_cast<std::uint16_t>(m.top);
-        part.bottom = static_cast<std::uint16_t>(m.bottom);
-        part.peak = static_cast<std::uint8_t>(m.peak);
         part.split = true;
         part.fitRms_px = static_cast<float>(circle[k].rms);
         addCandidate(part, order + 1 + static_cast<std::uint32_t>(k));

@@ -116,6 +116,8 @@ private:
     bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
                         std::uint32_t order);
     bool addCandidate(const Blob& blob, std::uint32_t order);
+    /// A blob with the bounds and peak of component \a m, to be given its centre and shape.
+    static Blob framedBlob(const Moments& m);
 
     BlobDetectorConfig config_;
     int width_;
