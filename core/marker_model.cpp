@@ -287,11 +287,14 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
     }
     Adjacency adjA, adjB;
     SminWorkspace::PairList& pairsB = workspace.pairs_;
-    for (std::size_t a = 0; a < models.size(); ++a) {
-        buildAdjacency(models[a], adjA);
-        for (std::size_t b = a; b < models.size(); ++b) {
-            buildAdjacency(models[b], adjB);
-            sortPairs(models[b], adjB, pairsB);
+    // Every pair a <= b, each b's pairs sorted once. The order of the pairs decides nothing but
+    // which copy sameShapeAs names when a model has several: for a model, the last pair with a
+    // copy in it is the same in this order as in the order of a first.
+    for (std::size_t b = 0; b < models.size(); ++b) {
+        buildAdjacency(models[b], adjB);
+        sortPairs(models[b], adjB, pairsB);
+        for (std::size_t a = 0; a <= b; ++a) {
+            buildAdjacency(models[a], adjA);
             const bool self = a == b;
             const std::size_t l =
                 largestCongruence(models[a], adjA, models[b], adjB, pairsB, self, config);
