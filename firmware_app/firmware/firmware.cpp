@@ -170,6 +170,9 @@ void Firmware::changeState(FirmwareState next) {
     if (trackingResumes &&
         (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded))
         tracker_->reset();
+    // Where the tracked markers were expected holds only for the tracking frame that follows.
+    if (next != state_)
+        markers_.clearExpected();
     state_ = next;
 }
 
@@ -421,7 +424,6 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     last_.number = frame.number;
     last_.time_s = hal::toSeconds(frame.midExposure());
     if (state_ == FirmwareState::Calibrating) {
-        markers_.clearExpected();
         const SessionStep step = calibration_.update(last_.time_s, markers_.points_rig_mm());
         if (step == SessionStep::BufferFull)
             ++counters_.sessionFramesRefused;
