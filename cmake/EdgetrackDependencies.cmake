@@ -9,6 +9,9 @@ pkg_check_modules(LIBSYSTEMD REQUIRED IMPORTED_TARGET libsystemd)
 # The LED ring strobe, button and status LED (hal/linux). Debian 12 ships libgpiod 1.6: v1 API.
 pkg_check_modules(LIBGPIOD REQUIRED IMPORTED_TARGET libgpiod>=1.6)
 pkg_check_modules(LIBCAMERA REQUIRED IMPORTED_TARGET libcamera>=0.0.3)
+# Bundle adjustment of rig calibration by wand (core/rig_calibration). For the aarch64 build its
+# arm64 package comes unpacked under /opt/edgetrack-arm64 (toolchain/install-deps.sh aarch64).
+find_package(Ceres 2.1 REQUIRED)
 
 # toml++ from its headers, so the host's package serves every target architecture. Its
 # implementation is compiled once, in edgetrack_toml, not in every file that reads TOML (Debian's

@@ -22,6 +22,7 @@ host_packages=(
     zlib1g-dev libsystemd-dev libgpiod-dev libcamera-dev
     libopencv-imgproc-dev
     libgtest-dev libgmock-dev libbenchmark-dev
+    libceres-dev
 )
 
 apt-get update -q
@@ -67,5 +68,20 @@ if want aarch64; then
     apt_install g++-aarch64-linux-gnu qemu-user \
         libc6:arm64 libstdc++6:arm64 \
         libgtest-dev:arm64 libgmock-dev:arm64 libbenchmark-dev:arm64 \
-        zlib1g-dev:arm64 libsystemd-dev:arm64 libgpiod-dev:arm64 libcamera-dev:arm64
+        zlib1g-dev:arm64 libsystemd-dev:arm64 libgpiod-dev:arm64 libcamera-dev:arm64 \
+        libsuitesparse-dev:arm64 libatlas-base-dev:arm64 liblapack3:arm64 libunwind8:arm64
+    # Ceres for arm64: Debian's glog and gflags packages are not multiarch, so their arm64 -dev
+    # packages cannot sit beside the host's. Ceres, glog and gflags for arm64 are unpacked under
+    # /opt/edgetrack-arm64 instead (their other libraries above are multiarch); the toolchain
+    # file searches there, and the test binaries find the libraries through their RUNPATH.
+    arm64_prefix=/opt/edgetrack-arm64
+    debs=$(mktemp -d)
+    chmod 755 "$debs"
+    (cd "$debs" && apt-get download libceres-dev:arm64 libceres3:arm64 libgoogle-glog-dev:arm64 \
+        libgoogle-glog0v6:arm64 libgflags-dev:arm64 libgflags2.2:arm64)
+    rm -rf "$arm64_prefix"
+    for deb in "$debs"/*.deb; do
+        dpkg-deb -x "$deb" "$arm64_prefix"
+    done
+    rm -rf "$debs"
 fi
