@@ -15,6 +15,7 @@
 #include "firmware_app/tools/calibrate_command.hpp"
 #include "firmware_app/tools/model_command.hpp"
 #include "firmware_app/tools/reconstruct_command.hpp"
+#include "firmware_app/tools/rig_calibrate_command.hpp"
 #include "firmware_app/tools/sim_command.hpp"
 #include "firmware_app/tools/track_command.hpp"
 
@@ -171,6 +172,24 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         modelActions.push_back(sub);
     }
 
+    CLI::App* rigCommand = app.add_subcommand("rig", "Measure the stereo rig");
+    rigCommand->require_subcommand(1);
+    RecordingOptions rig;
+    std::string wandText;
+    bool refineIntrinsics = false;
+    CLI::App* rigCalibrateCommand = rigCommand->add_subcommand(
+        "calibrate", "Measure camera 1's pose (and intrinsics) from a recording of a wand");
+    rigCalibrateCommand->add_option("--input", rig.input, "Recording of the wand")->required();
+    rigCalibrateCommand
+        ->add_option("--wand", wandText, "Marker spacings from one end, mm: D1[,D2...]")
+        ->required();
+    rigCalibrateCommand->add_option("--out", rig.out, "rig.toml to write")->required();
+    rigCalibrateCommand->add_option("--from", rig.from, "Level to start from")
+        ->check(levelValidator({"images", "blobs"}));
+    rigCalibrateCommand->add_flag("--refine-intrinsics", refineIntrinsics,
+                                  "Refine both cameras' focal lengths and principal points");
+    addConfigOption(rigCalibrateCommand, rig);
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp&) {
@@ -263,6 +282,27 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.showProgress = &err == &std::cerr && ::isatty(STDERR_FILENO) != 0;
         if (Status s = runTrack(options, out, err); !s) {
             err << "edgetrack track: " << s.error().message << "\n";
+            return kExitFailure;
+        }
+        return 0;
+    }
+    if (rigCalibrateCommand->parsed()) {
+        RigCalibrateOptions options;
+        options.input = rig.input;
+        options.out = rig.out;
+        options.refineIntrinsics = refineIntrinsics;
+        if (!rig.from.empty())
+            options.from = recording::parseLevel(rig.from);
+        Result<std::vector<double>> spacings = parseWandSpacings(wandText);
+        if (!spacings) {
+            err << "edgetrack rig calibrate: " << spacings.error().message << "\n";
+            return kExitUsage;
+        }
+        options.wandSpacings_mm = *spacings;
+        if (!loadSettings(rig, "rig calibrate", options.settings, err))
+            return kExitFailure;
+        if (Status s = runRigCalibrate(options, out); !s) {
+            err << "edgetrack rig calibrate: " << s.error().message << "\n";
             return kExitFailure;
         }
         return 0;

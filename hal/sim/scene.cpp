@@ -389,8 +389,10 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
             add(makeCube70(), m);
         }
     } else if (name == "wand") {
-        MotionSpec m = erratic({midline, 0.0, 600.0});
-        m.wanderAmplitude_mm = {120.0, 80.0, 80.0};
+        // Waved as a rig calibration asks: through the whole shared view, near and far.
+        MotionSpec m = erratic({midline, 0.0, 620.0});
+        m.wanderAmplitude_mm = {250.0, 150.0, 160.0};
+        m.wanderFrequency_hz = 0.15;
         m.shakeAmplitude_mm = 10.0;
         m.shakeAmplitude_rad = 0.2;
         add(makeWand(), m);
