@@ -58,6 +58,13 @@ public:
     const char* error() const { return error_ == nullptr ? "" : error_; }
 
     /**
+     * \brief Use \a rig from the next frame on (the board's own rig calibration).
+     * \return false, keeping the old rig, when \a rig is invalid or of another image size.
+     */
+    bool setRig(const StereoRig& rig) { return stereo_.setRig(rig); }
+    const StereoRig& rig() const { return stereo_.rig(); }
+
+    /**
      * \brief Detect the blobs of one camera's image into blobs(\a camera).
      * \param pixels 8-bit image of the rig's size; rows \a stride_bytes apart (>= width).
      */

@@ -267,10 +267,11 @@ StereoRig rigOf(const StereoRig& start, const Unknowns& u) {
     return StereoRig(cameras[0], cameras[1]);
 }
 
-/// One adjustment over \a used; returns the solver's iteration count, or nothing when it failed.
+/// One adjustment over \a used (of the wand poses alone when \a fixRig); returns the solver's
+/// iteration count, or nothing when it failed.
 std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
                           std::span<const Ordered> used, const RigCalibrationConfig& config,
-                          Unknowns& u) {
+                          bool fixRig, Unknowns& u) {
     ceres::Problem problem;
     std::array<std::array<double, 5>, 2> distortion{start.camera(0).intrinsics().distortion,
                                                     start.camera(1).intrinsics().distortion};
@@ -293,9 +294,13 @@ std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
             u.wand[f].data(),
             new ceres::ProductManifold<ceres::EuclideanManifold<3>, ceres::SphereManifold<3>>());
     }
-    if (!config.refineIntrinsics) {
+    if (!config.refineIntrinsics || fixRig) {
         problem.SetParameterBlockConstant(u.intrinsics[0].data());
         problem.SetParameterBlockConstant(u.intrinsics[1].data());
+    }
+    if (fixRig) {
+        problem.SetParameterBlockConstant(u.angleAxis.data());
+        problem.SetParameterBlockConstant(u.translation.data());
     }
 
     // Wand poses first: the Schur complement leaves only the cameras' few unknowns.
@@ -355,153 +360,51 @@ std::string percent(double share) {
     return std::to_string(static_cast<int>(std::lround(100.0 * share))) + "%";
 }
 
-} // namespace
-
-Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec& wand,
-                                          std::span<const WandFramePair> pairs,
-                                          const RigCalibrationConfig& config) {
-    if (!start.camera(0).isValid() || !start.camera(1).isValid())
-        return Error{"the starting rig's cameras are not valid"};
-    if (!wand.isValid())
-        return Error{"the wand needs two to eight markers at positive spacings"};
-    const std::size_t n = wand.markerCount;
-
-    RigCalibrationResult result;
-    RigCalibrationReport& report = result.report;
-    report.framePairs = pairs.size();
-    if (pairs.size() < config.minFrames)
-        return Error{"the wand was found in both images of only " + std::to_string(pairs.size()) +
-                     " frame pairs, at least " + std::to_string(config.minFrames) +
-                     " needed (check --wand and that the wand was in view of both cameras)"};
-
-    // Spread the pairs used over the whole session.
+/// The frame pairs used, at most \a maxFrames spread evenly over the whole session.
+std::vector<Ordered> spread(std::span<const WandFramePair> pairs, std::size_t maxFrames,
+                            RigCalibrationReport& report) {
     std::vector<Ordered> ordered;
-    const std::size_t take = std::min(pairs.size(), config.maxFrames);
+    const std::size_t take = std::min(pairs.size(), maxFrames);
     for (std::size_t i = 0; i < take; ++i)
         ordered.push_back({&pairs[i * pairs.size() / take], {false, false}});
     report.framesSkipped = pairs.size() - take;
+    return ordered;
+}
 
-    // (1) Essential matrix. Pairs whose ends both images name give correspondences at once;
-    // where a wand's ends are open, camera 1's reading is the one the starting rig's epipolar
-    // geometry prefers, unless enough named pairs give a better one first.
-    auto isNamed = [](const Ordered& o) {
-        return !o.pair->sightings[0].endsAmbiguous && !o.pair->sightings[1].endsAmbiguous;
-    };
-    std::mt19937_64 random(config.seed);
-    const double focal =
-        0.25 * (start.camera(0).intrinsics().fx_px + start.camera(0).intrinsics().fy_px +
-                start.camera(1).intrinsics().fx_px + start.camera(1).intrinsics().fy_px);
-    const double threshold = std::pow(config.ransacThreshold_px / focal, 2.0);
+/// E = [t]x R of a rig's camera 1 (unit baseline).
+Mat3 essentialOf(const StereoRig& rig) {
+    const CameraExtrinsics& ex = rig.camera(1).extrinsics();
+    return skew(ex.translation_cam_from_rig_mm.normalized()) * ex.rotation_cam_from_rig;
+}
 
-    std::vector<NormalizedPair> normalized(ordered.size());
-    auto essentialOf = [&](const std::vector<std::size_t>& members) -> std::optional<Mat3> {
-        std::vector<Vec2> x0, x1;
-        for (std::size_t i : members)
-            for (std::size_t k = 0; k < n; ++k) {
-                x0.push_back(normalized[i].x[0][k]);
-                x1.push_back(normalized[i].x[1][k]);
-            }
-        if (members.size() < 8)
-            return std::nullopt;
-        std::optional<Mat3> best;
-        std::size_t bestInliers = 0;
-        std::uniform_int_distribution<std::size_t> pick(0, members.size() - 1);
-        std::uniform_int_distribution<std::size_t> marker(0, n - 1);
-        std::array<Vec2, 8> s0, s1;
-        for (int iteration = 0; iteration < config.ransacIterations; ++iteration) {
-            // Eight markers of eight different pairs: one pair's markers lie on one line.
-            std::array<std::size_t, 8> chosen{};
-            for (std::size_t j = 0; j < 8; ++j) {
-                std::size_t candidate;
-                do
-                    candidate = pick(random);
-                while (std::find(chosen.begin(), chosen.begin() + static_cast<long>(j),
-                                 candidate) != chosen.begin() + static_cast<long>(j));
-                chosen[j] = candidate;
-                const std::size_t k = marker(random);
-                s0[j] = normalized[members[candidate]].x[0][k];
-                s1[j] = normalized[members[candidate]].x[1][k];
-            }
-            const std::optional<Mat3> E = eightPoint(s0, s1);
-            if (!E)
-                continue;
-            std::size_t inliers = 0;
-            for (std::size_t i = 0; i < x0.size(); ++i)
-                inliers += sampson(*E, x0[i], x1[i]) < threshold ? 1u : 0u;
-            if (inliers > bestInliers) {
-                bestInliers = inliers;
-                best = E;
-            }
-        }
-        if (!best)
-            return std::nullopt;
-        std::vector<Vec2> in0, in1;
-        for (std::size_t i = 0; i < x0.size(); ++i)
-            if (sampson(*best, x0[i], x1[i]) < threshold) {
-                in0.push_back(x0[i]);
-                in1.push_back(x1[i]);
-            }
-        return eightPoint(in0, in1);
-    };
-
-    std::vector<std::size_t> named;
-    for (std::size_t i = 0; i < ordered.size(); ++i) {
-        normalized[i] = normalize(start, ordered[i], n);
-        if (normalized[i].valid && isNamed(ordered[i]))
-            named.push_back(i);
+/// Where a pair's wand ends are open in an image, read camera 1 the way round with the smaller
+/// epipolar error under \a E. \return true when camera 1's reading was turned.
+bool resolveOpenEnds(const Mat3& E, const NormalizedPair& x, std::size_t n, Ordered& o) {
+    if (!o.pair->sightings[0].endsAmbiguous && !o.pair->sightings[1].endsAmbiguous)
+        return false;
+    double kept = 0.0;
+    double flipped = 0.0;
+    for (std::size_t k = 0; k < n; ++k) {
+        kept += sampson(E, x.x[0][k], x.x[1][k]);
+        flipped += sampson(E, x.x[0][k], x.x[1][n - 1 - k]);
     }
-    Mat3 E = skew(start.camera(1).extrinsics().translation_cam_from_rig_mm.normalized()) *
-             start.camera(1).extrinsics().rotation_cam_from_rig;
-    if (named.size() >= config.minFrames / 2)
-        if (const std::optional<Mat3> fromNamed = essentialOf(named))
-            E = *fromNamed;
+    if (flipped >= kept)
+        return false;
+    o.reversed[1] = !o.reversed[1];
+    return true;
+}
 
-    std::vector<std::size_t> all;
-    for (std::size_t i = 0; i < ordered.size(); ++i) {
-        if (!normalized[i].valid)
-            continue;
-        if (!isNamed(ordered[i])) {
-            double kept = 0.0;
-            double flipped = 0.0;
-            for (std::size_t k = 0; k < n; ++k) {
-                kept += sampson(E, normalized[i].x[0][k], normalized[i].x[1][k]);
-                flipped += sampson(E, normalized[i].x[0][k], normalized[i].x[1][n - 1 - k]);
-            }
-            if (flipped < kept) {
-                ordered[i].reversed[1] = true;
-                normalized[i] = normalize(start, ordered[i], n);
-            }
-        }
-        all.push_back(i);
-    }
-    const std::optional<Mat3> essential = essentialOf(all);
-    if (!essential)
-        return Error{"no camera pose fits the wand sightings (essential matrix failed)"};
-    std::vector<Vec2> x0, x1;
-    for (std::size_t i : all)
-        for (std::size_t k = 0; k < n; ++k) {
-            x0.push_back(normalized[i].x[0][k]);
-            x1.push_back(normalized[i].x[1][k]);
-        }
-    std::optional<Pose> pose = decompose(*essential, x0, x1);
-    if (!pose)
-        return Error{"no camera pose puts the wand in front of both cameras"};
-
-    // Scale: the median end-to-end length of the wand triangulated with a unit baseline.
-    StereoRig unit(start.camera(0), withPose(start.camera(1), *pose));
-    std::vector<double> lengths;
+/// Steps 3 to 5 from \a initial: seed every wand pose, adjust (camera 1's pose and, when asked,
+/// the intrinsics; nothing of the rig when \a fixRig), refuse what fits badly, adjust again,
+/// report. \a start gives the lens models and the pose the report measures the change from.
+Result<RigCalibrationResult> adjustAndReport(const StereoRig& start, const StereoRig& initial,
+                                             const WandSpec& wand, std::vector<Ordered>& ordered,
+                                             const std::vector<std::size_t>& all,
+                                             RigCalibrationReport report,
+                                             const RigCalibrationConfig& config, bool fixRig) {
+    const std::size_t n = wand.markerCount;
+    RigCalibrationResult result;
     std::array<Vec3, kMaxWandMarkers> points{};
-    for (std::size_t i : all)
-        if (triangulateWand(unit, ordered[i], n, points))
-            lengths.push_back((points[n - 1] - points[0]).norm());
-    if (lengths.size() < config.minFrames)
-        return Error{"the wand triangulates in front of both cameras in only " +
-                     std::to_string(lengths.size()) + " frame pairs"};
-    std::nth_element(lengths.begin(), lengths.begin() + static_cast<long>(lengths.size() / 2),
-                     lengths.end());
-    pose->t *= wand.length_mm() / lengths[lengths.size() / 2];
-    const StereoRig initial(start.camera(0), withPose(start.camera(1), *pose));
-
     // Where both images left the ends open, the reading whose triangulation fits the wand's
     // spacings wins (a symmetric wand reads the same either way).
     Unknowns u;
@@ -531,15 +434,17 @@ Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec
             {origin.x(), origin.y(), origin.z(), direction.x(), direction.y(), direction.z()});
     }
     for (int c = 0; c < 2; ++c) {
-        const CameraIntrinsics& in = start.camera(c).intrinsics();
+        const CameraIntrinsics& in = initial.camera(c).intrinsics();
         u.intrinsics[static_cast<std::size_t>(c)] = {in.fx_px, in.fy_px, in.cx_px, in.cy_px};
     }
     {
+        const CameraExtrinsics& ex = initial.camera(1).extrinsics();
         std::array<double, 9> columns{};
         Eigen::Map<Eigen::Matrix<double, 3, 3>> rotation(columns.data()); // column-major, as ceres
-        rotation = pose->R;
+        rotation = ex.rotation_cam_from_rig;
         ceres::RotationMatrixToAngleAxis(columns.data(), u.angleAxis.data());
-        u.translation = {pose->t.x(), pose->t.y(), pose->t.z()};
+        const Vec3& t = ex.translation_cam_from_rig_mm;
+        u.translation = {t.x(), t.y(), t.z()};
     }
 
     // (2) Adjust, (3) refuse what fits badly, adjust again.
@@ -548,7 +453,7 @@ Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec
             return Error{"only " + std::to_string(used.size()) +
                          " frame pairs agree on a rig, at least " +
                          std::to_string(config.minFrames) + " needed"};
-        const std::optional<int> iterations = adjust(start, wand, used, config, u);
+        const std::optional<int> iterations = adjust(start, wand, used, config, fixRig, u);
         if (!iterations)
             return Error{"the bundle adjustment failed"};
         report.solverIterations += *iterations;
@@ -639,7 +544,166 @@ Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec
     if (report.lengthErrorRms_mm > config.poorLength_mm)
         report.warnings.push_back("the wand's length comes out with an RMS error above " +
                                   std::to_string(config.poorLength_mm).substr(0, 4) + " mm");
+    result.report = std::move(report);
     return result;
+}
+
+} // namespace
+
+Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec& wand,
+                                          std::span<const WandFramePair> pairs,
+                                          const RigCalibrationConfig& config) {
+    if (!start.camera(0).isValid() || !start.camera(1).isValid())
+        return Error{"the starting rig's cameras are not valid"};
+    if (!wand.isValid())
+        return Error{"the wand needs two to eight markers at positive spacings"};
+    const std::size_t n = wand.markerCount;
+
+    RigCalibrationReport report;
+    report.framePairs = pairs.size();
+    if (pairs.size() < config.minFrames)
+        return Error{"the wand was found in both images of only " + std::to_string(pairs.size()) +
+                     " frame pairs, at least " + std::to_string(config.minFrames) +
+                     " needed (check --wand and that the wand was in view of both cameras)"};
+
+    std::vector<Ordered> ordered = spread(pairs, config.maxFrames, report);
+
+    // (1) Essential matrix. Pairs whose ends both images name give correspondences at once;
+    // where a wand's ends are open, camera 1's reading is the one the starting rig's epipolar
+    // geometry prefers, unless enough named pairs give a better one first.
+    auto isNamed = [](const Ordered& o) {
+        return !o.pair->sightings[0].endsAmbiguous && !o.pair->sightings[1].endsAmbiguous;
+    };
+    std::mt19937_64 random(config.seed);
+    const double focal =
+        0.25 * (start.camera(0).intrinsics().fx_px + start.camera(0).intrinsics().fy_px +
+                start.camera(1).intrinsics().fx_px + start.camera(1).intrinsics().fy_px);
+    const double threshold = std::pow(config.ransacThreshold_px / focal, 2.0);
+
+    std::vector<NormalizedPair> normalized(ordered.size());
+    auto ransacEssential = [&](const std::vector<std::size_t>& members) -> std::optional<Mat3> {
+        std::vector<Vec2> x0, x1;
+        for (std::size_t i : members)
+            for (std::size_t k = 0; k < n; ++k) {
+                x0.push_back(normalized[i].x[0][k]);
+                x1.push_back(normalized[i].x[1][k]);
+            }
+        if (members.size() < 8)
+            return std::nullopt;
+        std::optional<Mat3> best;
+        std::size_t bestInliers = 0;
+        std::uniform_int_distribution<std::size_t> pick(0, members.size() - 1);
+        std::uniform_int_distribution<std::size_t> marker(0, n - 1);
+        std::array<Vec2, 8> s0, s1;
+        for (int iteration = 0; iteration < config.ransacIterations; ++iteration) {
+            // Eight markers of eight different pairs: one pair's markers lie on one line.
+            std::array<std::size_t, 8> chosen{};
+            for (std::size_t j = 0; j < 8; ++j) {
+                std::size_t candidate;
+                do
+                    candidate = pick(random);
+                while (std::find(chosen.begin(), chosen.begin() + static_cast<long>(j),
+                                 candidate) != chosen.begin() + static_cast<long>(j));
+                chosen[j] = candidate;
+                const std::size_t k = marker(random);
+                s0[j] = normalized[members[candidate]].x[0][k];
+                s1[j] = normalized[members[candidate]].x[1][k];
+            }
+            const std::optional<Mat3> E = eightPoint(s0, s1);
+            if (!E)
+                continue;
+            std::size_t inliers = 0;
+            for (std::size_t i = 0; i < x0.size(); ++i)
+                inliers += sampson(*E, x0[i], x1[i]) < threshold ? 1u : 0u;
+            if (inliers > bestInliers) {
+                bestInliers = inliers;
+                best = E;
+            }
+        }
+        if (!best)
+            return std::nullopt;
+        std::vector<Vec2> in0, in1;
+        for (std::size_t i = 0; i < x0.size(); ++i)
+            if (sampson(*best, x0[i], x1[i]) < threshold) {
+                in0.push_back(x0[i]);
+                in1.push_back(x1[i]);
+            }
+        return eightPoint(in0, in1);
+    };
+
+    std::vector<std::size_t> named;
+    for (std::size_t i = 0; i < ordered.size(); ++i) {
+        normalized[i] = normalize(start, ordered[i], n);
+        if (normalized[i].valid && isNamed(ordered[i]))
+            named.push_back(i);
+    }
+    Mat3 E = essentialOf(start);
+    if (named.size() >= config.minFrames / 2)
+        if (const std::optional<Mat3> fromNamed = ransacEssential(named))
+            E = *fromNamed;
+
+    std::vector<std::size_t> all;
+    for (std::size_t i = 0; i < ordered.size(); ++i) {
+        if (!normalized[i].valid)
+            continue;
+        if (resolveOpenEnds(E, normalized[i], n, ordered[i]))
+            normalized[i] = normalize(start, ordered[i], n);
+        all.push_back(i);
+    }
+    const std::optional<Mat3> essential = ransacEssential(all);
+    if (!essential)
+        return Error{"no camera pose fits the wand sightings (essential matrix failed)"};
+    std::vector<Vec2> x0, x1;
+    for (std::size_t i : all)
+        for (std::size_t k = 0; k < n; ++k) {
+            x0.push_back(normalized[i].x[0][k]);
+            x1.push_back(normalized[i].x[1][k]);
+        }
+    std::optional<Pose> pose = decompose(*essential, x0, x1);
+    if (!pose)
+        return Error{"no camera pose puts the wand in front of both cameras"};
+
+    // Scale: the median end-to-end length of the wand triangulated with a unit baseline.
+    StereoRig unit(start.camera(0), withPose(start.camera(1), *pose));
+    std::vector<double> lengths;
+    std::array<Vec3, kMaxWandMarkers> points{};
+    for (std::size_t i : all)
+        if (triangulateWand(unit, ordered[i], n, points))
+            lengths.push_back((points[n - 1] - points[0]).norm());
+    if (lengths.size() < config.minFrames)
+        return Error{"the wand triangulates in front of both cameras in only " +
+                     std::to_string(lengths.size()) + " frame pairs"};
+    std::nth_element(lengths.begin(), lengths.begin() + static_cast<long>(lengths.size() / 2),
+                     lengths.end());
+    pose->t *= wand.length_mm() / lengths[lengths.size() / 2];
+    const StereoRig initial(start.camera(0), withPose(start.camera(1), *pose));
+
+    return adjustAndReport(start, initial, wand, ordered, all, std::move(report), config, false);
+}
+
+Result<RigCalibrationReport> assessRig(const StereoRig& rig, const WandSpec& wand,
+                                       std::span<const WandFramePair> pairs,
+                                       const RigCalibrationConfig& config) {
+    if (!rig.isValid() || !wand.isValid())
+        return Error{"the rig or the wand is not valid"};
+    const std::size_t n = wand.markerCount;
+    RigCalibrationReport report;
+    report.framePairs = pairs.size();
+    std::vector<Ordered> ordered = spread(pairs, config.maxFrames, report);
+    const Mat3 E = essentialOf(rig);
+    std::vector<std::size_t> all;
+    for (std::size_t i = 0; i < ordered.size(); ++i) {
+        const NormalizedPair x = normalize(rig, ordered[i], n);
+        if (!x.valid)
+            continue;
+        resolveOpenEnds(E, x, n, ordered[i]);
+        all.push_back(i);
+    }
+    Result<RigCalibrationResult> assessed =
+        adjustAndReport(rig, rig, wand, ordered, all, std::move(report), config, true);
+    if (!assessed)
+        return assessed.error();
+    return std::move(assessed->report);
 }
 
 } // namespace edgetrack

@@ -96,4 +96,13 @@ Result<RigCalibrationResult> calibrateRig(const StereoRig& start, const WandSpec
                                           std::span<const WandFramePair> pairs,
                                           const RigCalibrationConfig& config);
 
+/**
+ * \brief How well \a rig fits wand sightings: the wand poses are adjusted as calibrateRig()
+ * adjusts them, the rig stays as it is, and the report says how it fits (its rig fields are
+ * those of \a rig). The board compares this with a new rig's report to keep the better one.
+ */
+Result<RigCalibrationReport> assessRig(const StereoRig& rig, const WandSpec& wand,
+                                       std::span<const WandFramePair> pairs,
+                                       const RigCalibrationConfig& config);
+
 } // namespace edgetrack

@@ -136,10 +136,26 @@ StereoMatcher::StereoMatcher(const StereoRig& rig, const StereoConfig& config,
     valid_ = rig.isValid() && config.sigmaEpipolar_px > 0.0 && config.sigmaSimilarity_px > 0.0 &&
              config.minDepth_mm > 0.0 && config.maxDepth_mm > config.minDepth_mm &&
              maxBlobsPerCamera > 0;
-    const double focalBaseline = rig.rectifiedFocal_px() * rig.baseline_mm();
-    minDisparity_px_ = focalBaseline / config.maxDepth_mm;
-    maxDisparity_px_ = focalBaseline / config.minDepth_mm;
+    disparityRange();
     band_px_ = config.epipolarBand_sigmas * config.sigmaEpipolar_px;
+}
+
+void StereoMatcher::disparityRange() {
+    const double focalBaseline = rig_.rectifiedFocal_px() * rig_.baseline_mm();
+    minDisparity_px_ = focalBaseline / config_.maxDepth_mm;
+    maxDisparity_px_ = focalBaseline / config_.minDepth_mm;
+}
+
+bool StereoMatcher::setRig(const StereoRig& rig) {
+    for (int c = 0; c < 2; ++c)
+        if (rig.camera(c).intrinsics().width_px != rig_.camera(c).intrinsics().width_px ||
+            rig.camera(c).intrinsics().height_px != rig_.camera(c).intrinsics().height_px)
+            return false;
+    if (!rig.isValid())
+        return false;
+    rig_ = rig;
+    disparityRange();
+    return true;
 }
 
 StereoMatcher::~StereoMatcher() = default;
@@ -375,6 +391,8 @@ void StereoMatcher::triangulatePair(int i, int j, BoundedVectorView<StereoMarker
     marker->position_rig_mm = point->point_rig_mm;
     marker->rayGap_mm = static_cast<float>(point->rayGap_mm);
     marker->reprojection_px = static_cast<float>(reprojection);
+    marker->epipolar_px =
+        static_cast<float>(p.rectified[0][idx(i)].y() - p.rectified[1][idx(j)].y());
 }
 
 void StereoMatcher::match(std::span<const Blob> blobs0, std::span<const Blob> blobs1,

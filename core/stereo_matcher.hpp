@@ -46,6 +46,9 @@ struct StereoMarker {
     Vec3 position_rig_mm = Vec3::Zero();
     float rayGap_mm = 0.0f;
     float reprojection_px = 0.0f;
+    /// Rectified row of blob0 minus that of blob1 (px): the epipolar error. Its spread over
+    /// many markers tells how well the rig still fits the cameras.
+    float epipolar_px = 0.0f;
 };
 
 /// \brief A correspondence between element \a left of one set and \a right of the other.
@@ -81,6 +84,12 @@ public:
 
     bool isValid() const { return valid_; }
 
+    /**
+     * \brief Use \a rig from the next frame on (a new rig calibration); the storage stays.
+     * \return false, keeping the old rig, when \a rig is invalid or of another image size.
+     */
+    bool setRig(const StereoRig& rig);
+
     /// \brief The paper's matcher: blobs of both cameras in, triangulated markers out.
     void match(std::span<const Blob> blobs0, std::span<const Blob> blobs1,
                BoundedVectorView<StereoMarker>& out);
@@ -107,6 +116,7 @@ public:
 private:
     struct Prepared;
 
+    void disparityRange();
     bool inBand(int i, int j) const;
     double neighbourhoodDistance(int i, int j) const;
     void collectNeighbours(int camera);

@@ -189,3 +189,20 @@ TEST(RigCalibration, TooFewSightingsOrABadWandGiveAnErrorNotARig) {
         EXPECT_FALSE(garbage->report.good());
     }
 }
+
+TEST(RigCalibration, AssessingARigTellsTheTrueOneFromAMovedOne) {
+    const StereoRig truth = test::desktopRig();
+    const WandSpec wand = WandSpec::fromSpacings(kWand);
+    const Session session = waveWand(truth, wand, 400, 0.05, 9);
+    const Result<RigCalibrationReport> fits = assessRig(truth, wand, session.pairs, {});
+    ASSERT_TRUE(fits) << fits.error().message;
+    const double expected = 0.05 * std::sqrt(2.0) * std::sqrt(7.0 / 12.0);
+    EXPECT_NEAR(fits->reprojectionRms_px[1], expected, 0.1 * expected);
+    EXPECT_EQ(fits->rotationChange_deg, 0.0);
+
+    // Camera 1 knocked by 0.2 degrees and 1 mm: the wand poses cannot make up for it.
+    const Result<RigCalibrationReport> knocked =
+        assessRig(disturbed(truth, 1.0, 0.2), wand, session.pairs, {});
+    ASSERT_TRUE(knocked);
+    EXPECT_GT(knocked->reprojectionRms_px[1], 10.0 * fits->reprojectionRms_px[1]);
+}
