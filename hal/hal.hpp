@@ -24,7 +24,10 @@ struct Board {
     LedRing& ledRing;
     Button& button;
     StatusLed& statusLed;
+    /// The models' partition.
     Flash& flash;
+    /// The rig's partition: the board's own stereo calibration (a rig calibration by wand).
+    Flash& rigFlash;
     CanBus& can;
     UdpSender& udp;
 };

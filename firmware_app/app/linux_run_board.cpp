@@ -45,6 +45,8 @@ linux_hal::LinuxBoardConfig linuxBoardConfig(const FirmwareConfig& config) {
     board.flashDevice = config.flash.device;
     board.flashSize = config.flash.size_bytes;
     board.flashEraseBlock = config.flash.eraseBlock_bytes;
+    board.rigFlashDevice = config.flash.rigDevice;
+    board.rigFlashSize = config.flash.rigSize_bytes;
     board.canEnabled = config.can.enabled;
     board.can.interface = config.can.interface;
     board.can.fd = config.can.fd;

@@ -32,6 +32,11 @@ public:
     /// \brief Press the button for \a duration, as typed (a board without hasTypedButton() ignores
     /// it: its button is a real one).
     virtual void press(hal::Nanoseconds duration) { (void)duration; }
+    /// \brief Two presses of \a duration, the second starting \a gap after the first's release.
+    virtual void press(hal::Nanoseconds duration, hal::Nanoseconds gap) {
+        (void)duration;
+        (void)gap;
+    }
     /// \brief What must be up before the board is ready, for the console ("cameras, GPIO").
     virtual std::string devicesName() const = 0;
     /// \brief Whether every device the firmware uses is up; \a why names the first that is not.

@@ -37,7 +37,7 @@ public:
     explicit StdinButton(bool enabled)
         : enabled_(enabled) {}
 
-    enum class Press { None, Short, Long, Status };
+    enum class Press { None, Short, Double, Long, Status };
 
     Press poll() {
         if (!enabled_)
@@ -54,6 +54,8 @@ public:
         const std::string_view line(buffer, static_cast<std::size_t>(n));
         if (line.starts_with("l"))
             return Press::Long;
+        if (line.starts_with("d"))
+            return Press::Double;
         if (line.starts_with("s"))
             return Press::Status;
         return Press::Short;
@@ -119,9 +121,10 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
             err << "edgetrack run: --can-log " << canLog->error() << "\n";
             return 1;
         }
-        loggingBoard.emplace(hal::Board{
-            backendBoard.clock, backendBoard.cameras, backendBoard.ledRing, backendBoard.button,
-            backendBoard.statusLed, backendBoard.flash, *canLog, backendBoard.udp});
+        loggingBoard.emplace(hal::Board{backendBoard.clock, backendBoard.cameras,
+                                        backendBoard.ledRing, backendBoard.button,
+                                        backendBoard.statusLed, backendBoard.flash,
+                                        backendBoard.rigFlash, *canLog, backendBoard.udp});
     }
     hal::Board& board = loggingBoard ? *loggingBoard : backendBoard;
 
@@ -156,7 +159,8 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     const bool interactive = typedButton && ::isatty(STDIN_FILENO) != 0;
     if (interactive)
         out << "edgetrack run: press Enter to start or end a calibration (the button), type "
-               "'long' to delete all models, 's' for the status view, Ctrl-C to stop\n";
+               "'d' for a double press (rig calibration by wand), 'long' to delete all models, "
+               "'s' for the status view, Ctrl-C to stop\n";
     out << std::flush;
 
     stopRequested = false;
@@ -179,6 +183,10 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         switch (stdinButton.poll()) {
         case StdinButton::Press::Short:
             runBoard.press(200 * hal::kNanosecondsPerMillisecond);
+            break;
+        case StdinButton::Press::Double:
+            runBoard.press(100 * hal::kNanosecondsPerMillisecond,
+                           static_cast<hal::Nanoseconds>(config.gpio.doublePress_s * 0.5e9));
             break;
         case StdinButton::Press::Long:
             runBoard.press(static_cast<hal::Nanoseconds>((config.gpio.longPress_s + 0.3) * 1e9));

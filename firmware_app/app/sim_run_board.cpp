@@ -16,8 +16,8 @@ public:
     SimRunBoard(sim::Scene scene, std::uint64_t seed, const sim::SimBoardOptions& options,
                 std::string sceneName)
         : sim_(std::move(scene), seed, options)
-        , board_{sim_.clock,     sim_.cameras, sim_.ledRing, sim_.button,
-                 sim_.statusLed, sim_.flash,   sim_.can,     udp_}
+        , board_{sim_.clock, sim_.cameras,  sim_.ledRing, sim_.button, sim_.statusLed,
+                 sim_.flash, sim_.rigFlash, sim_.can,     udp_}
         , sceneName_(std::move(sceneName)) {}
 
     bool udpValid() const { return udp_.isValid(); }
@@ -29,6 +29,10 @@ public:
     bool hasTypedButton() const override { return true; }
     void press(hal::Nanoseconds duration) override {
         sim_.button.press(sim_.clock.now(), duration);
+    }
+    void press(hal::Nanoseconds duration, hal::Nanoseconds gap) override {
+        sim_.button.press(sim_.clock.now(), duration);
+        sim_.button.press(sim_.clock.now() + duration + gap, duration);
     }
     std::string devicesName() const override { return "cameras"; }
 
@@ -58,6 +62,7 @@ Result<std::unique_ptr<RunBoard>> makeSimRunBoard(const FirmwareConfig& config,
     options.cameraBufferPairs = config.cameras.buffers;
     options.flashSize = config.flash.size_bytes;
     options.flashEraseBlock = config.flash.eraseBlock_bytes;
+    options.rigFlashSize = config.flash.rigSize_bytes;
     auto board = std::make_unique<SimRunBoard>(std::move(*made), seed, options, scene);
     if (!board->udpValid())
         return Error{std::string("cannot open a UDP socket: ") + std::strerror(board->udpErrno())};

@@ -18,13 +18,37 @@ void ButtonInput::settle(hal::Nanoseconds until) {
             longReported_ = false;
         } else if (!longReported_) {
             // A press held past the long-press time was reported when its release edge arrived.
-            emit(ButtonEvent::ShortPress);
+            releaseShort(rawSince_);
         }
     }
     if (stable_ && !longReported_ && until - pressedAt_ >= longPress_) {
         longReported_ = true;
+        // A short press waiting for a partner was just a short press, then came a long one.
+        if (shortPending_) {
+            shortPending_ = false;
+            emit(ButtonEvent::ShortPress);
+        }
         emit(ButtonEvent::LongPress);
     }
+    // No second press within the window: the waiting press was a single one.
+    if (shortPending_ && !stable_ && until - shortReleasedAt_ >= doublePress_) {
+        shortPending_ = false;
+        emit(ButtonEvent::ShortPress);
+    }
+}
+
+void ButtonInput::releaseShort(hal::Nanoseconds releasedAt) {
+    if (doublePress_ <= 0) {
+        emit(ButtonEvent::ShortPress);
+        return;
+    }
+    if (shortPending_ && pressedAt_ - shortReleasedAt_ <= doublePress_) {
+        shortPending_ = false;
+        emit(ButtonEvent::DoublePress);
+        return;
+    }
+    shortPending_ = true;
+    shortReleasedAt_ = releasedAt;
 }
 
 void ButtonInput::edge(const hal::ButtonEdge& edge) {

@@ -10,8 +10,12 @@ namespace edgetrack::app {
 
 enum class ButtonEvent {
     None,
-    /// Pressed and released before the long-press time: start or end a calibration.
+    /// Pressed and released before the long-press time, and no second press followed within
+    /// the double-press time: start or end a calibration.
     ShortPress,
+    /// Two short presses, the second starting within the double-press time of the first's
+    /// release: start (or end) a rig calibration.
+    DoublePress,
     /// Held for the long-press time: reported while still held, so the LED confirms at once.
     LongPress,
 };
@@ -26,9 +30,12 @@ enum class ButtonEvent {
  */
 class ButtonInput {
 public:
-    ButtonInput(hal::Nanoseconds debounce, hal::Nanoseconds longPress)
+    /// \param doublePress 0: every short press is reported at its release (no double presses).
+    ButtonInput(hal::Nanoseconds debounce, hal::Nanoseconds longPress,
+                hal::Nanoseconds doublePress = 0)
         : debounce_(debounce)
-        , longPress_(longPress) {}
+        , longPress_(longPress)
+        , doublePress_(doublePress) {}
 
     /// \brief A raw edge from hal::Button::nextEdge().
     void edge(const hal::ButtonEdge& edge);
@@ -41,10 +48,15 @@ public:
 
 private:
     void settle(hal::Nanoseconds until);
+    void releaseShort(hal::Nanoseconds releasedAt);
     void emit(ButtonEvent event);
 
     hal::Nanoseconds debounce_;
     hal::Nanoseconds longPress_;
+    hal::Nanoseconds doublePress_;
+    /// A short press released at shortReleasedAt_ waits for a second one.
+    bool shortPending_ = false;
+    hal::Nanoseconds shortReleasedAt_ = 0;
     bool raw_ = false;
     hal::Nanoseconds rawSince_ = 0;
     bool stable_ = false;

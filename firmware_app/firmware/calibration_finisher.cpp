@@ -14,13 +14,13 @@ namespace {
 /// an idle core (the board's four cores leave three to it).
 constexpr int kWorkerNice = 10;
 
+} // namespace
+
 void lowerThisThreadsPriority() {
     // Linux keeps a nice value per thread; setpriority on the thread id changes only this one.
     // Failing (a sandbox that forbids it) costs nothing but the priority.
     (void)setpriority(PRIO_PROCESS, static_cast<id_t>(gettid()), kWorkerNice);
 }
-
-} // namespace
 
 CalibrationFinisher::~CalibrationFinisher() {
     if (worker_.joinable())

@@ -16,6 +16,9 @@
 
 namespace edgetrack::app {
 
+/// \brief Give the calling (worker) thread a lower scheduling priority than the frame loop's.
+void lowerThisThreadsPriority();
+
 /// \brief What finishing a calibration produced, for the frame loop to take over.
 struct FinishedCalibration {
     /// The new model set (the known models merged with the learnt ones) and what happened to

@@ -36,6 +36,10 @@ const char* stateName(FirmwareState state) {
         return "finishing";
     case FirmwareState::Degraded:
         return "degraded";
+    case FirmwareState::RigCalibrating:
+        return "calibrating rig";
+    case FirmwareState::RigFinishing:
+        return "finishing rig";
     }
     return "?";
 }
@@ -56,13 +60,16 @@ void StageTime::add(double us) {
 Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const StereoRig& rig)
     : config_(config)
     , board_(board)
-    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s))
+    , button_(fromSeconds(config.gpio.debounce_ms * 1e-3), fromSeconds(config.gpio.longPress_s),
+              fromSeconds(config.gpio.doublePress_s))
     , queue_(config.cameras.queueDepth)
     , strobe_(fromSeconds(config.gpio.strobeLead_us * 1e-6),
               fromSeconds(config.gpio.strobeTail_us * 1e-6))
     , markers_(rig, config.markers)
     , store_(board.flash, MarkerSet::kCapacity)
     , calibration_(config, rig)
+    , rigStore_(board.rigFlash)
+    , rigSession_(config.rig)
     , outputs_(config) {
     if (!markers_.isValid())
         error_ = markers_.error();
@@ -71,6 +78,10 @@ Firmware::Firmware(const FirmwareConfig& config, hal::Board& board, const Stereo
                  std::to_string(MarkerSet::kCapacity) + ", the session buffer not empty)";
     if (!store_.isValid())
         error_ = "the flash partition cannot hold two model slots";
+    if (!rigStore_.isValid())
+        error_ = "the rig's flash partition cannot hold two rig slots";
+    if (!rigSession_.isValid())
+        error_ = "[rig_calibration] wand: 1 to 7 positive spacings (mm)";
     tracker_.emplace(std::span<const MarkerModel>{}, config.tracking);
     if (!tracker_->isValid())
         error_ = "[tracking] settings are unusable";
@@ -97,6 +108,14 @@ void Firmware::start() {
         setModels({});
         flashReport_ = loaded.error().message;
     }
+    // The board's own rig, measured by wand, wins over the configured one.
+    if (Result<StoredRig> rig = rigStore_.load(); !rig)
+        flashReport_ += "; configured rig (" + rig.error().message + ")";
+    else if (!markers_.setRig(rig->rig))
+        flashReport_ += "; configured rig (the rig on flash is for another image size)";
+    else
+        flashReport_ += "; rig from flash slot " + std::string(rig->slot == 0 ? "A" : "B") +
+                        " (save #" + std::to_string(rig->sequence) + ")";
     changeState(FirmwareState::Tracking);
     if (Status s = board_.cameras.start(); !s) {
         enterDegraded(("cameras did not start: " + s.error().message).c_str());
@@ -164,11 +183,17 @@ void Firmware::changeState(FirmwareState next) {
         calibration_.close();
         ++counters_.calibrationsAbandoned;
     }
+    if (state_ == FirmwareState::RigCalibrating && rigSession_.isOpen()) {
+        rigSession_.abandon();
+        ++counters_.rigCalibrationsFailed;
+    }
     // Whatever was tracked before a calibration, or before the cameras went down, has moved.
-    const bool trackingResumes =
-        next == FirmwareState::Tracking || next == FirmwareState::Finishing;
+    const bool trackingResumes = next == FirmwareState::Tracking ||
+                                 next == FirmwareState::Finishing ||
+                                 next == FirmwareState::RigFinishing;
     if (trackingResumes &&
-        (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded))
+        (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded ||
+         state_ == FirmwareState::RigCalibrating))
         tracker_->reset();
     // Where the tracked markers were expected holds only for the tracking frame that follows.
     if (next != state_)
@@ -182,6 +207,24 @@ void Firmware::handleButton(hal::Nanoseconds now) {
         button_.edge(edge);
     for (ButtonEvent event = button_.poll(now); event != ButtonEvent::None;
          event = button_.poll(now)) {
+        if (rigSession_.busy()) {
+            note("button ignored: the rig calibration is still finishing");
+            continue;
+        }
+        if (state_ == FirmwareState::RigCalibrating) {
+            // Any press ends the wand session; a long one also deletes the models, as always.
+            finishRigCalibration("the button");
+            if (event == ButtonEvent::LongPress)
+                deleteModels();
+            continue;
+        }
+        if (event == ButtonEvent::DoublePress) {
+            if (state_ == FirmwareState::Tracking && !calibration_.finishing())
+                startRigCalibration();
+            else
+                note("double press ignored: the board is " + std::string(stateName(state_)));
+            continue;
+        }
         if (calibration_.finishing()) {
             // The worker owns the session and the flash until it is done.
             if (event == ButtonEvent::LongPress) {
@@ -276,6 +319,117 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
     note(std::move(text));
 }
 
+void Firmware::startRigCalibration() {
+    rigSession_.open(last_.time_s);
+    changeState(FirmwareState::RigCalibrating);
+    ++counters_.rigCalibrationsStarted;
+    note("rig calibration started: wave the wand through the whole view");
+}
+
+void Firmware::finishRigCalibration(const char* why) {
+    char lasted[96];
+    std::snprintf(lasted, sizeof lasted, " after %.1f s, the wand in both images in %zu frames",
+                  last_.time_s - rigSession_.opened_s(), rigSession_.pairs());
+    rigEvent_ = std::string("rig calibration ended by ") + why + lasted;
+    if (rigSession_.pairs() < RigCalibrationConfig{}.minFrames) {
+        changeState(FirmwareState::Tracking); // abandons the session: counted as failed
+        statusLed_.showOnce(LedPattern::RigPoor, board_.clock.now());
+        note(rigEvent_ + ": too few to calibrate; rig unchanged");
+        return;
+    }
+    // The solver runs beside the frame loop; the rig from before is used until it is done.
+    rigSession_.finish(markers_.rig(), rigStore_);
+    changeState(FirmwareState::RigFinishing);
+    note(rigEvent_ + ": solving");
+}
+
+void Firmware::takeFinishedRig(FinishedRigCalibration finished) {
+    if (state_ == FirmwareState::RigFinishing)
+        changeState(restingState());
+    char text[256];
+    if (!finished.calibrated) {
+        ++counters_.rigCalibrationsFailed;
+        statusLed_.showOnce(LedPattern::RigPoor, board_.clock.now());
+        note(rigEvent_ + ": " + finished.error + "; rig unchanged");
+        return;
+    }
+    const RigCalibrationReport& report = finished.calibrated->report;
+    const double before = finished.previous ? meanReprojection_px(*finished.previous) : 0.0;
+    if (!finished.adopted) {
+        ++counters_.rigCalibrationsKept;
+        statusLed_.showOnce(LedPattern::RigPoor, board_.clock.now());
+        std::snprintf(text, sizeof text,
+                      ": the new rig fits the wand worse (%.3f px) than the rig in use (%.3f px), "
+                      "which stays",
+                      finished.heldOut_px, before);
+        note(rigEvent_ + text);
+        return;
+    }
+    const CameraModel& was = markers_.rig().camera(1);
+    const CameraModel& now = finished.calibrated->rig.camera(1);
+    const double turned_deg = Eigen::AngleAxisd(now.extrinsics().rotation_cam_from_rig *
+                                                was.extrinsics().rotation_cam_from_rig.transpose())
+                                  .angle() *
+                              180.0 / 3.14159265358979323846;
+    const double moved_mm = (now.centre_rig_mm() - was.centre_rig_mm()).norm();
+    markers_.setRig(finished.calibrated->rig);
+    ++counters_.rigCalibrationsAdopted;
+    epipolar_ = EpipolarWatch{};
+    statusLed_.showOnce(finished.good() ? LedPattern::RigGood : LedPattern::RigPoor,
+                        board_.clock.now());
+    std::snprintf(text, sizeof text,
+                  ": new rig in use (reprojection %.3f px, was %.3f px; wand length RMS %.2f mm; "
+                  "camera 1 moved %.2f mm, turned %.3f degrees; %s)",
+                  finished.heldOut_px, before, report.lengthErrorRms_mm, moved_mm, turned_deg,
+                  report.good() ? "good" : report.warnings.front().c_str());
+    std::string event = rigEvent_ + text;
+    if (finished.saved) {
+        event += ", saved to flash";
+    } else {
+        ++counters_.flashErrors;
+        event += ", NOT saved to flash (" + finished.saved.error().message + ")";
+    }
+    note(std::move(event));
+}
+
+void Firmware::waitForRigCalibration() {
+    if (std::optional<FinishedRigCalibration> finished = rigSession_.wait())
+        takeFinishedRig(std::move(*finished));
+}
+
+FirmwareState Firmware::restingState() const {
+    if (calibration_.finishing())
+        return FirmwareState::Finishing;
+    if (rigSession_.busy())
+        return FirmwareState::RigFinishing;
+    return FirmwareState::Tracking;
+}
+
+void Firmware::watchEpipolar() {
+    const std::span<const StereoMarker> matched = markers_.markers();
+    if (matched.size() < 3)
+        return;
+    double sum = 0.0;
+    for (const StereoMarker& m : matched)
+        sum += static_cast<double>(m.epipolar_px) * static_cast<double>(m.epipolar_px);
+    const double rms = std::sqrt(sum / static_cast<double>(matched.size()));
+    // An exponential average over about a hundred frames: a second at the camera rate.
+    ++epipolar_.frames;
+    epipolar_.rms_px =
+        epipolar_.frames == 1 ? rms : epipolar_.rms_px + 0.01 * (rms - epipolar_.rms_px);
+    const bool drifted = epipolar_.frames >= 100 && epipolar_.rms_px > config_.rig.driftWarning_px;
+    if (drifted && !epipolar_.warned) {
+        ++counters_.rigDriftWarnings;
+        char text[160];
+        std::snprintf(text, sizeof text,
+                      "the rig seems to have drifted: matched markers are %.2f px off their "
+                      "epipolar lines; a rig calibration (double press) is due",
+                      epipolar_.rms_px);
+        note(text);
+    }
+    epipolar_.warned = drifted;
+}
+
 void Firmware::waitForFinishing() {
     if (std::optional<FinishedCalibration> finished = calibration_.wait())
         takeFinishedCalibration(std::move(*finished));
@@ -320,7 +474,7 @@ void Firmware::retryCameras(hal::Nanoseconds now) {
     cameras_.started = true;
     strobe_.restart(board_.ledRing);
     cameras_.lastFrameAt = board_.clock.now();
-    changeState(calibration_.finishing() ? FirmwareState::Finishing : FirmwareState::Tracking);
+    changeState(restingState());
     note("cameras restarted");
 }
 
@@ -331,7 +485,10 @@ LedPattern Firmware::statePattern() const {
     case FirmwareState::Calibrating:
         return LedPattern::Blink;
     case FirmwareState::Finishing:
+    case FirmwareState::RigFinishing:
         return LedPattern::Finishing;
+    case FirmwareState::RigCalibrating:
+        return LedPattern::Wand;
     case FirmwareState::Tracking:
         break;
     }
@@ -350,6 +507,9 @@ void Firmware::step() {
     if (calibration_.finishing())
         if (std::optional<FinishedCalibration> finished = calibration_.poll())
             takeFinishedCalibration(std::move(*finished));
+    if (rigSession_.busy())
+        if (std::optional<FinishedRigCalibration> finished = rigSession_.poll())
+            takeFinishedRig(std::move(*finished));
     handleButton(now);
     if (state_ == FirmwareState::Degraded) {
         retryCameras(now);
@@ -429,7 +589,13 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
             ++counters_.sessionFramesRefused;
         if (step != SessionStep::Continue)
             finishCalibration(endReason(step));
+    } else if (state_ == FirmwareState::RigCalibrating) {
+        const RigSessionStep step = rigSession_.update(
+            last_.time_s, markers_.rig(), markers_.blobs(0).span(), markers_.blobs(1).span());
+        if (step != RigSessionStep::Continue)
+            finishRigCalibration(step == RigSessionStep::TimeUp ? "its duration" : "a full buffer");
     } else {
+        watchEpipolar();
         tracker_->update(last_.time_s, markers_.points_rig_mm());
         expectTrackedMarkers();
         outputs_.updatePoses(last_.time_s, tracker_->bodies());
@@ -499,6 +665,10 @@ std::string Firmware::statusLine() const {
     if (state_ == FirmwareState::Calibrating)
         std::snprintf(line, sizeof line, "%s: frame %llu, %zu objects", stateName(state_),
                       static_cast<unsigned long long>(last_.number), calibrationObjects());
+    else if (state_ == FirmwareState::RigCalibrating)
+        std::snprintf(line, sizeof line, "%s: frame %llu, the wand in both images in %zu frames",
+                      stateName(state_), static_cast<unsigned long long>(last_.number),
+                      rigSession_.pairs());
     else
         std::snprintf(line, sizeof line, "%s: frame %llu, %zu of %zu bodies", stateName(state_),
                       static_cast<unsigned long long>(last_.number), found, models_.size());
@@ -577,6 +747,14 @@ std::string Firmware::statusReport() const {
     row("models refused (max_models)", c.modelOverflow);
     row("learnt fragments dropped", c.fragmentsDropped);
     row("model deletions", c.modelDeletions);
+    row("rig calibrations started", c.rigCalibrationsStarted);
+    row("rig calibrations adopted", c.rigCalibrationsAdopted);
+    row("rig calibrations kept the old rig", c.rigCalibrationsKept);
+    row("rig calibrations without a rig", c.rigCalibrationsFailed);
+    row("rig drift warnings", c.rigDriftWarnings);
+    std::snprintf(line, sizeof line, "%-34s %.3f (warns above %.2f)\n",
+                  "epipolar RMS of markers (px)", epipolar_.rms_px, config_.rig.driftWarning_px);
+    out += line;
     row("flash errors", c.flashErrors);
     return out;
 }

@@ -16,6 +16,8 @@
 #include "firmware_app/firmware/firmware_config.hpp"
 #include "firmware_app/firmware/model_store.hpp"
 #include "firmware_app/firmware/pose_outputs.hpp"
+#include "firmware_app/firmware/rig_session.hpp"
+#include "firmware_app/firmware/rig_store.hpp"
 #include "firmware_app/firmware/status_pattern.hpp"
 #include "firmware_app/firmware/strobe_scheduler.hpp"
 #include "hal/hal.hpp"
@@ -32,6 +34,11 @@ enum class FirmwareState : std::uint8_t {
     Finishing,
     /// The cameras are gone: nothing is sent and the cameras are restarted every retry_s.
     Degraded,
+    /// A rig calibration (double press) collects sightings of the wand; nothing is tracked.
+    RigCalibrating,
+    /// The rig calibration is solved in a worker thread; the models are tracked meanwhile with
+    /// the rig from before, as in Tracking.
+    RigFinishing,
 };
 
 const char* stateName(FirmwareState state);
@@ -83,6 +90,15 @@ struct FirmwareCounters {
     std::uint64_t fragmentsDropped = 0;
     std::uint64_t modelDeletions = 0;
     std::uint64_t flashErrors = 0;
+    std::uint64_t rigCalibrationsStarted = 0;
+    /// New rigs taken into use (they fit the wand better than the rig before).
+    std::uint64_t rigCalibrationsAdopted = 0;
+    /// New rigs that fitted worse than the one in use, which stayed.
+    std::uint64_t rigCalibrationsKept = 0;
+    /// Sessions that gave no rig: too few wand frames, no pose that fits, abandoned.
+    std::uint64_t rigCalibrationsFailed = 0;
+    /// Times the epipolar error of matched markers rose above [rig_calibration] drift_warning_px.
+    std::uint64_t rigDriftWarnings = 0;
 };
 
 /**
@@ -141,6 +157,13 @@ public:
     std::uint64_t lastFrame() const { return last_.number; }
     /// \return mid-exposure of the last processed frame (s, the board's clock).
     double lastFrameTime_s() const { return last_.time_s; }
+    /// \return the rig in use: from the configuration, from flash, or from a rig calibration.
+    const StereoRig& rig() const { return markers_.rig(); }
+    /// \return the running RMS of matched markers' epipolar errors (rectified px), about the
+    /// last second of tracking: it grows when the cameras have moved against each other.
+    double epipolarRms_px() const { return epipolar_.rms_px; }
+    /// \brief Wait until a rig calibration's worker is done and its rig in use (tests).
+    void waitForRigCalibration();
     /// \return the marker front end: the last processed frame's blobs and 3D markers.
     const MarkerPipeline& markerPipeline() const { return markers_; }
     /// \return latency of the last processed frame, mid-exposure to send (s).
@@ -163,9 +186,18 @@ private:
     void startCalibration();
     void finishCalibration(const char* why);
     void takeFinishedCalibration(FinishedCalibration finished);
-    /// Tracking or Finishing: the known models are tracked and sent.
+    void startRigCalibration();
+    void finishRigCalibration(const char* why);
+    void takeFinishedRig(FinishedRigCalibration finished);
+    /// The state to be in when nothing is being calibrated in the frame loop: Finishing or
+    /// RigFinishing while a worker runs, else Tracking.
+    FirmwareState restingState() const;
+    /// Follow the epipolar error of the frame's matched markers (the rig's self-check).
+    void watchEpipolar();
+    /// Tracking or a worker finishing: the known models are tracked and sent.
     bool tracksModels() const {
-        return state_ == FirmwareState::Tracking || state_ == FirmwareState::Finishing;
+        return state_ == FirmwareState::Tracking || state_ == FirmwareState::Finishing ||
+               state_ == FirmwareState::RigFinishing;
     }
     void deleteModels();
     void setModels(std::vector<NamedModel> models);
@@ -216,6 +248,16 @@ private:
     /// Finishing: "calibration ended by ... after ... s", and a long press waiting for the end.
     std::string finishingEvent_;
     bool deletePending_ = false;
+
+    // The rig: its store on flash, a rig calibration by wand, and the epipolar self-check.
+    RigStore rigStore_;
+    RigSession rigSession_;
+    std::string rigEvent_;
+    struct EpipolarWatch {
+        double rms_px = 0.0;
+        std::uint64_t frames = 0;
+        bool warned = false;
+    } epipolar_;
 
     PoseOutputs outputs_;
     StatusLedDriver statusLed_;

@@ -11,6 +11,7 @@
 #include <toml++/toml.h>
 
 #include "core/marker_set.hpp"
+#include "core/wand_finder.hpp"
 #include "firmware_app/formats/toml_document.hpp"
 #include "firmware_app/formats/toml_table.hpp"
 
@@ -71,6 +72,7 @@ void readGpio(Section& s, GpioSettings& g) {
     s.real("strobe_tail_us", g.strobeTail_us, 0.0, 10000.0);
     s.real("debounce_ms", g.debounce_ms, 0.0, 500.0);
     s.real("long_press_s", g.longPress_s, 0.5, 30.0);
+    s.real("double_press_s", g.doublePress_s, 0.0, 2.0);
 }
 
 void readBlobs(Section& s, BlobDetectorConfig& b) {
@@ -176,6 +178,33 @@ void readFlash(Section& s, FlashSettings& f) {
               "must be a whole number of erase blocks");
     s.require(f.size_bytes >= 2 * f.eraseBlock_bytes, "size_bytes",
               "must hold two slots of at least one erase block each");
+    s.path("rig_device", f.rigDevice);
+    s.integer("rig_size_bytes", f.rigSize_bytes, 512, 1LL << 32);
+    s.require(f.eraseBlock_bytes > 0 && f.rigSize_bytes % f.eraseBlock_bytes == 0, "rig_size_bytes",
+              "must be a whole number of erase blocks");
+    s.require(f.rigSize_bytes >= 2 * f.eraseBlock_bytes, "rig_size_bytes",
+              "must hold two slots of at least one erase block each");
+}
+
+void readRigCalibration(Section& s, RigCalibrationSettings& r) {
+    if (const toml::node* node = s.find("wand")) {
+        const toml::array* array = node->as_array();
+        if (array == nullptr || array->empty() || array->size() + 1 > kMaxWandMarkers)
+            return s.fail(*node, "wand",
+                          "expected 1 to 7 marker spacings in mm, e.g. [55.0, 102.0]");
+        std::vector<double> spacings;
+        for (const toml::node& entry : *array) {
+            const std::optional<double> value = entry.value<double>();
+            if (!value || !(*value > 0.0) || !std::isfinite(*value))
+                return s.fail(entry, "wand", "spacings must be positive numbers (mm)");
+            spacings.push_back(*value);
+        }
+        r.wand_mm = std::move(spacings);
+    }
+    s.real("duration_s", r.duration_s, 1.0, 600.0);
+    s.integer("max_frames", r.maxFrames, 50, kMaxCount);
+    s.flag("refine_intrinsics", r.refineIntrinsics);
+    s.real("drift_warning_px", r.driftWarning_px, 0.0, 100.0, true);
 }
 
 void readUdp(Section& s, UdpSettings& u) {
@@ -292,6 +321,8 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
          [&](Section& s) { readTracking(s, config.tracking, config.maxModels); });
     read(root, "filter", "filter", [&](Section& s) { readFilter(s, config.filter); });
     read(root, "flash", "flash", [&](Section& s) { readFlash(s, config.flash); });
+    read(root, "rig_calibration", "rig_calibration",
+         [&](Section& s) { readRigCalibration(s, config.rig); });
     read(root, "health", "health", [&](Section& s) { readHealth(s, config.health); });
     if (const toml::table* output = table(root, "output")) {
         read(*output, "udp", "output.udp", [&](Section& s) { readUdp(s, config.udp); });
@@ -303,8 +334,8 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
     }
     if (!error) {
         static constexpr std::string_view kSections[] = {
-            "cameras",  "gpio",   "blobs", "stereo", "markers", "calibration",
-            "tracking", "filter", "flash", "health", "output"};
+            "cameras",  "gpio",   "blobs", "stereo",          "markers", "calibration",
+            "tracking", "filter", "flash", "rig_calibration", "health",  "output"};
         for (const auto& [key, node] : root) {
             bool known = false;
             for (std::string_view section : kSections)

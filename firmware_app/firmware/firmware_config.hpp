@@ -62,6 +62,9 @@ struct GpioSettings {
     double debounce_ms = 30.0;
     /// A press held this long is a long press (delete all models).
     double longPress_s = 3.0;
+    /// A second short press starting within this time of the first's release makes a double
+    /// press (rig calibration); a single short press is known only once it has passed.
+    double doublePress_s = 0.4;
 
     bool operator==(const GpioSettings&) const = default;
 };
@@ -108,14 +111,34 @@ struct CanSettings {
     bool operator==(const CanSettings&) const = default;
 };
 
-/// \brief The flash partition that keeps the models.
+/// \brief The flash partitions that keep the models and the board's own rig.
 struct FlashSettings {
     /// MTD device or file on the board.
     std::filesystem::path device = "/var/lib/edgetrack/models.flash";
     std::size_t size_bytes = 1u << 20;
     std::size_t eraseBlock_bytes = 4096;
+    /// The rig's partition (rig calibration by wand), same erase block.
+    std::filesystem::path rigDevice = "/var/lib/edgetrack/rig.flash";
+    std::size_t rigSize_bytes = 64u << 10;
 
     bool operator==(const FlashSettings&) const = default;
+};
+
+/// \brief The board's own rig calibration by wand (a double press of the button).
+struct RigCalibrationSettings {
+    /// The wand's marker spacings from one end (mm), as `rig calibrate --wand`.
+    std::vector<double> wand_mm{55.0, 102.0};
+    /// A session ends by itself after this long (a short press ends it sooner).
+    double duration_s = 30.0;
+    /// Frame pairs with the wand the session keeps (sized at start-up: about 300 bytes each).
+    std::size_t maxFrames = 6000;
+    /// Refine both cameras' focal lengths and principal points too.
+    bool refineIntrinsics = false;
+    /// While tracking, the RMS epipolar error of matched markers (rectified px) above which the
+    /// status view says the rig has drifted and a rig calibration is due.
+    double driftWarning_px = 1.0;
+
+    bool operator==(const RigCalibrationSettings&) const = default;
 };
 
 /// \brief Status reporting and the frame-time budget.
@@ -144,6 +167,7 @@ struct FirmwareConfig {
     std::size_t maxModels = 16;
     PoseFilterConfig filter{};
     FlashSettings flash{};
+    RigCalibrationSettings rig{};
     UdpSettings udp{};
     CanSettings can{};
     HealthSettings health{};

@@ -33,12 +33,27 @@ bool ledLevel(LedPattern pattern, hal::Nanoseconds since) {
         const hal::Nanoseconds phase = since % (500 * kMs);
         return phase < 80 * kMs || (phase >= 160 * kMs && phase < 240 * kMs);
     }
+    case LedPattern::Wand: {
+        const hal::Nanoseconds phase = since % (1000 * kMs);
+        return phase < 100 * kMs || (phase >= 200 * kMs && phase < 300 * kMs);
+    }
+    case LedPattern::RigGood:
+        return since < patternDuration(LedPattern::RigGood);
+    case LedPattern::RigPoor:
+        return since < patternDuration(LedPattern::RigPoor) && square(since, 500 * kMs, 300 * kMs);
     }
     return false;
 }
 
 hal::Nanoseconds patternDuration(LedPattern pattern) {
-    return pattern == LedPattern::Confirm ? 1500 * kMs : 0;
+    switch (pattern) {
+    case LedPattern::Confirm:
+    case LedPattern::RigGood:
+    case LedPattern::RigPoor:
+        return 1500 * kMs;
+    default:
+        return 0;
+    }
 }
 
 void StatusLedDriver::showOnce(LedPattern pattern, hal::Nanoseconds now) {

@@ -22,6 +22,12 @@ enum class LedPattern {
     /// Acknowledges a long press (models deleted): three double flashes in 1.5 s, then the
     /// state's own pattern.
     Confirm,
+    /// Rig calibration, collecting the wand: two 100 ms flashes every second.
+    Wand,
+    /// A new rig in use that fits well: on for 1.5 s, then the state's own pattern.
+    RigGood,
+    /// A rig calibration that gave no better rig, or a poor one: three 300 ms flashes in 1.5 s.
+    RigPoor,
 };
 
 /// \return whether the LED is lit \a since after the pattern started.

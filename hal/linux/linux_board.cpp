@@ -13,19 +13,19 @@ LinuxBoard::LinuxBoard(const LinuxBoardConfig& config)
     , button_(GpioLineAddress{config.gpioChip, config.buttonLine}, clock_, config.buttonActiveLow)
     , statusLed_(GpioLineAddress{config.gpioChip, config.statusLine}, clock_)
     , flash_(config.flashDevice, config.flashSize, config.flashEraseBlock)
+    , rigFlash_(config.rigFlashDevice, config.rigFlashSize, config.flashEraseBlock)
     , socketCan_(config.canEnabled ? std::make_unique<SocketCanBus>(config.can, clock_) : nullptr)
-    , board_{clock_,
-             cameras_,
-             ledRing_,
-             button_,
-             statusLed_,
-             flash_,
-             socketCan_ ? static_cast<hal::CanBus&>(*socketCan_) : disabledCan_,
+    , board_{clock_,     cameras_,
+             ledRing_,   button_,
+             statusLed_, flash_,
+             rigFlash_,  socketCan_ ? static_cast<hal::CanBus&>(*socketCan_) : disabledCan_,
              udp_} {
     if (!cameras_.isValid())
         error_ = cameras_.errorText();
     else if (!flash_.isValid())
         error_ = "model flash " + config.flashDevice.string() + ": " + flash_.error();
+    else if (!rigFlash_.isValid())
+        error_ = "rig flash " + config.rigFlashDevice.string() + ": " + rigFlash_.error();
     else if (!udp_.isValid())
         error_ = std::string("cannot open a UDP socket: ") + std::strerror(udp_.errnoAtOpen());
 }

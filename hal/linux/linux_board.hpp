@@ -28,6 +28,9 @@ struct LinuxBoardConfig {
     std::filesystem::path flashDevice;
     std::size_t flashSize = 1u << 20;
     std::size_t flashEraseBlock = 4096;
+    /// The rig's partition (same erase block).
+    std::filesystem::path rigFlashDevice;
+    std::size_t rigFlashSize = 64u << 10;
     /// Without CAN the board's bus accepts nothing and reports nothing.
     bool canEnabled = false;
     SocketCanConfig can;
@@ -80,6 +83,7 @@ private:
     GpiodButton button_;
     GpiodStatusLed statusLed_;
     FileFlash flash_;
+    FileFlash rigFlash_;
     std::unique_ptr<SocketCanBus> socketCan_;
     DisabledCanBus disabledCan_;
     PosixUdpSender udp_;

@@ -16,6 +16,7 @@ struct SimBoardOptions {
     int cameraBufferPairs = 4;
     std::size_t flashSize = 1u << 20;
     std::size_t flashEraseBlock = 4096;
+    std::size_t rigFlashSize = 64u << 10;
     std::size_t canTransmitQueue = 16;
 };
 
@@ -33,8 +34,9 @@ public:
         , button(clock)
         , statusLed(clock)
         , flash(options.flashSize, options.flashEraseBlock)
+        , rigFlash(options.rigFlashSize, options.flashEraseBlock)
         , can(clock, options.canTransmitQueue)
-        , board{clock, cameras, ledRing, button, statusLed, flash, can, udp} {}
+        , board{clock, cameras, ledRing, button, statusLed, flash, rigFlash, can, udp} {}
 
     World world;
     SimClock clock;
@@ -43,6 +45,7 @@ public:
     SimButton button;
     SimStatusLed statusLed;
     SimFlash flash;
+    SimFlash rigFlash;
     SimCanBus can;
     SimUdpSender udp;
     hal::Board board;

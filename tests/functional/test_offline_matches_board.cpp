@@ -87,8 +87,8 @@ TEST(OfflineMatchesBoard, ReconstructWithTheBoardsConfigFindsTheBoardsMarkers) {
     const fs::path rec = dir.path() / "rec";
     fs::create_directories(rec / "images");
     RecordingCameraPair cameras(sim->cameras, rec);
-    hal::Board board{sim->clock,     cameras,    sim->ledRing, sim->button,
-                     sim->statusLed, sim->flash, sim->can,     sim->udp};
+    hal::Board board{sim->clock, cameras,       sim->ledRing, sim->button, sim->statusLed,
+                     sim->flash, sim->rigFlash, sim->can,     sim->udp};
     Firmware firmware(*config, board, sim->world.rig());
     ASSERT_TRUE(firmware.isValid()) << firmware.error();
     firmware.start();

@@ -210,6 +210,7 @@ protected:
                << kRigFile << "\"\n"
                << "[gpio]\nchip = \"" << chip << "\"\ndebounce_ms = 30.0\n"
                << "[flash]\ndevice = \"/tmp/edgetrack-hil/models.flash\"\n"
+                  "rig_device = \"/tmp/edgetrack-hil/rig.flash\"\n"
                << "[output.udp]\ndestinations = [\"127.0.0.1:5000\"]\n"
                << "[output.can]\nenabled = true\ninterface = \"vcan0\"\n"
                << "[health]\nstatus_interval_s = 0.25\n";

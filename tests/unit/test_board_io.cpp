@@ -55,6 +55,49 @@ TEST(ButtonInput, PressAndReleaseReadTogetherAreClassifiedByTheirOwnTimes) {
     EXPECT_EQ(button.poll(6000 * kMs), ButtonEvent::None);
 }
 
+ButtonInput makeButtonWithDoublePress() {
+    return ButtonInput(30 * kMs, 3000 * kMs, 400 * kMs);
+}
+
+TEST(ButtonInput, TwoQuickShortPressesAreOneDoublePress) {
+    ButtonInput button = makeButtonWithDoublePress();
+    button.edge({0, true});
+    button.edge({150 * kMs, false});
+    // Released, but a second press may follow: nothing yet.
+    EXPECT_EQ(button.poll(300 * kMs), ButtonEvent::None);
+    button.edge({400 * kMs, true});
+    button.edge({550 * kMs, false});
+    EXPECT_EQ(button.poll(600 * kMs), ButtonEvent::DoublePress);
+    EXPECT_EQ(button.poll(2000 * kMs), ButtonEvent::None);
+}
+
+TEST(ButtonInput, AShortPressIsKnownOnceTheDoublePressTimeHasPassed) {
+    ButtonInput button = makeButtonWithDoublePress();
+    button.edge({0, true});
+    button.edge({150 * kMs, false});
+    EXPECT_EQ(button.poll(500 * kMs), ButtonEvent::None);
+    EXPECT_EQ(button.poll(560 * kMs), ButtonEvent::ShortPress);
+    // Two presses further apart than the window are two short presses.
+    button.edge({1000 * kMs, true});
+    button.edge({1100 * kMs, false});
+    button.edge({1700 * kMs, true});
+    button.edge({1800 * kMs, false});
+    EXPECT_EQ(button.poll(3000 * kMs), ButtonEvent::ShortPress);
+    EXPECT_EQ(button.poll(3000 * kMs), ButtonEvent::ShortPress);
+    EXPECT_EQ(button.poll(3000 * kMs), ButtonEvent::None);
+}
+
+TEST(ButtonInput, AShortPressThenALongOneAreBothReported) {
+    ButtonInput button = makeButtonWithDoublePress();
+    button.edge({0, true});
+    button.edge({150 * kMs, false});
+    button.edge({300 * kMs, true});
+    EXPECT_EQ(button.poll(3400 * kMs), ButtonEvent::ShortPress);
+    EXPECT_EQ(button.poll(3400 * kMs), ButtonEvent::LongPress);
+    button.edge({4000 * kMs, false});
+    EXPECT_EQ(button.poll(5000 * kMs), ButtonEvent::None);
+}
+
 /// Lit share of one pattern over \a span, sampled every millisecond.
 double dutyCycle(LedPattern pattern, hal::Nanoseconds span) {
     int on = 0;
