@@ -21,6 +21,26 @@ bool isC3dFile(const fs::path& input) {
     return extension == ".c3d";
 }
 
+Result<PixelRecording> openPixelRecording(const std::filesystem::path& input,
+                                          std::optional<recording::Level> from,
+                                          const std::string& what) {
+    if (isC3dFile(input))
+        return Error{input.string() + ": a C3D file holds only points; " + what +
+                     " needs images or blobs"};
+    Result<recording::Inventory> inventory = recording::inspect(input);
+    if (!inventory)
+        return inventory.error();
+    Result<recording::Level> level = recording::chooseLevel(input, *inventory, from);
+    if (!level)
+        return level.error();
+    if (*level == recording::Level::Points)
+        return Error{input.string() + ": holds only points; " + what + " needs images or blobs"};
+    Result<StereoRig> rig = recording::readRig(input / "rig.toml");
+    if (!rig)
+        return rig.error();
+    return PixelRecording{*level, std::move(*rig)};
+}
+
 Status prepareOutputDirectory(const fs::path& out) {
     std::error_code ec;
     if (fs::exists(out, ec) && !fs::is_empty(out, ec))

@@ -72,6 +72,21 @@ forEachMarkerFrame(const std::filesystem::path& input, std::optional<recording::
 /// \return whether \a input names a C3D file (by its extension).
 bool isC3dFile(const std::filesystem::path& input);
 
+/// \brief A recording at images or blobs level: the level to read, and its rig.toml.
+struct PixelRecording {
+    recording::Level level = recording::Level::Blobs;
+    StereoRig rig;
+};
+
+/**
+ * \brief Open \a input for a command that needs pixels (\a what, e.g. "reconstruct"): the level
+ * (\a from or the lowest present) and the rig; a one-line error for a C3D file, a recording of
+ * points only, or a bad rig.toml.
+ */
+Result<PixelRecording> openPixelRecording(const std::filesystem::path& input,
+                                          std::optional<recording::Level> from,
+                                          const std::string& what);
+
 /**
  * \brief Make \a out ready to be written: created if missing; refused when it already holds
  * anything, so that no run mixes its files with an older one's.

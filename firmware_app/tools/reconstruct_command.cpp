@@ -10,7 +10,6 @@
 namespace edgetrack::app {
 
 namespace fs = std::filesystem;
-using recording::Level;
 
 namespace {
 
@@ -32,21 +31,10 @@ Status copyTruth(const fs::path& input, const fs::path& out) {
 } // namespace
 
 Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) {
-    if (isC3dFile(options.input))
-        return Error{options.input.string() +
-                     ": a C3D file holds only points; reconstruct needs images or blobs"};
-    Result<recording::Inventory> inventory = recording::inspect(options.input);
-    if (!inventory)
-        return inventory.error();
-    Result<Level> level = recording::chooseLevel(options.input, *inventory, options.from);
-    if (!level)
-        return level.error();
-    if (*level == Level::Points)
-        return Error{options.input.string() +
-                     ": holds only points; reconstruct needs images or blobs"};
-    Result<StereoRig> rig = recording::readRig(options.input / "rig.toml");
-    if (!rig)
-        return rig.error();
+    Result<PixelRecording> input = openPixelRecording(options.input, options.from, "reconstruct");
+    if (!input)
+        return input.error();
+    const StereoRig& rig = input->rig;
     Result<std::vector<recording::FrameRow>> frames =
         recording::readFrames(options.input / "frames.csv");
     if (!frames)
@@ -57,7 +45,7 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     std::vector<recording::BlobRow> blobRows;
     std::vector<recording::PointRow> pointRows;
     Result<FrameSourceSummary> read = forEachMarkerFrame(
-        options.input, *level, options.settings.config.markers,
+        options.input, input->level, options.settings.config.markers,
         [&](const MarkerFrame& frame) -> Status {
             for (int c = 0; c < 2; ++c)
                 for (const Blob& b : frame.blobs[c])
@@ -70,7 +58,7 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     if (!read)
         return read.error();
 
-    if (Status s = recording::writeRig(options.out / "rig.toml", *rig); !s)
+    if (Status s = recording::writeRig(options.out / "rig.toml", rig); !s)
         return s;
     if (Status s = recording::writeFrames(options.out / "frames.csv", *frames); !s)
         return s;

@@ -9,7 +9,6 @@
 namespace edgetrack::app {
 
 namespace fs = std::filesystem;
-using recording::Level;
 
 Result<std::vector<double>> parseWandSpacings(std::string_view text) {
     std::vector<double> spacings;
@@ -62,21 +61,11 @@ Status runRigCalibrate(const RigCalibrateOptions& options, std::ostream& report)
     if (!wand.isValid())
         return Error{"--wand: give one to " + std::to_string(kMaxWandMarkers - 1) +
                      " positive spacings in mm"};
-    if (isC3dFile(options.input))
-        return Error{options.input.string() +
-                     ": a C3D file holds only points; rig calibration needs images or blobs"};
-    Result<recording::Inventory> inventory = recording::inspect(options.input);
-    if (!inventory)
-        return inventory.error();
-    Result<Level> level = recording::chooseLevel(options.input, *inventory, options.from);
-    if (!level)
-        return level.error();
-    if (*level == Level::Points)
-        return Error{options.input.string() +
-                     ": holds only points; rig calibration needs images or blobs"};
-    Result<StereoRig> start = recording::readRig(options.input / "rig.toml");
-    if (!start)
-        return start.error();
+    Result<PixelRecording> input =
+        openPixelRecording(options.input, options.from, "rig calibration");
+    if (!input)
+        return input.error();
+    const StereoRig& start = input->rig;
     std::error_code ec;
     if (fs::exists(options.out, ec) && fs::is_directory(options.out, ec))
         return Error{options.out.string() + ": is a directory; --out names the rig.toml to write"};
@@ -84,13 +73,13 @@ Status runRigCalibrate(const RigCalibrateOptions& options, std::ostream& report)
     std::array<WandFinder, 2> finders{WandFinder(wand, {}), WandFinder(wand, {})};
     std::vector<WandFramePair> pairs;
     Result<FrameSourceSummary> read = forEachMarkerFrame(
-        options.input, *level, options.settings.config.markers,
+        options.input, input->level, options.settings.config.markers,
         [&](const MarkerFrame& frame) -> Status {
             WandFramePair pair;
             pair.frame = frame.frame;
             for (int c = 0; c < 2; ++c) {
                 std::optional<WandSighting> s =
-                    finders[static_cast<std::size_t>(c)].find(start->camera(c), frame.blobs[c]);
+                    finders[static_cast<std::size_t>(c)].find(start.camera(c), frame.blobs[c]);
                 if (!s)
                     return Ok{};
                 pair.sightings[static_cast<std::size_t>(c)] = *s;
@@ -110,7 +99,7 @@ Status runRigCalibrate(const RigCalibrateOptions& options, std::ostream& report)
 
     RigCalibrationConfig config;
     config.refineIntrinsics = options.refineIntrinsics;
-    Result<RigCalibrationResult> result = calibrateRig(*start, wand, pairs, config);
+    Result<RigCalibrationResult> result = calibrateRig(start, wand, pairs, config);
     if (!result)
         return result.error();
     printRigReport(result->report, report);

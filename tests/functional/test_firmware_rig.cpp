@@ -7,31 +7,10 @@
 #include "firmware_app/firmware/rig_store.hpp"
 #include "tests/functional/firmware_on_sim_board.hpp"
 #include "tests/support/alloc_guard.hpp"
+#include "tests/support/rig_knock.hpp"
 
 namespace edgetrack::app {
 namespace {
-
-/// \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted axis:
-/// the cameras after a knock, against the rig the board believes.
-StereoRig knocked(const StereoRig& rig, double offset_mm, double turn_deg) {
-    CameraExtrinsics ex = rig.camera(1).extrinsics();
-    ex.rotation_cam_from_rig =
-        Eigen::AngleAxisd(turn_deg * M_PI / 180.0, Vec3(0.6, 0.8, 0.0)).toRotationMatrix() *
-        ex.rotation_cam_from_rig;
-    ex.translation_cam_from_rig_mm += offset_mm * Vec3(0.48, -0.6, 0.64);
-    return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
-}
-
-double rotationError_deg(const StereoRig& a, const StereoRig& b) {
-    return Eigen::AngleAxisd(a.camera(1).extrinsics().rotation_cam_from_rig *
-                             b.camera(1).extrinsics().rotation_cam_from_rig.transpose())
-               .angle() *
-           180.0 / M_PI;
-}
-
-double positionError_mm(const StereoRig& a, const StereoRig& b) {
-    return (a.camera(1).centre_rig_mm() - b.camera(1).centre_rig_mm()).norm();
-}
 
 /// Mean number of markers stereo finds per frame over \a frames frames.
 double markersPerFrame(Firmware& firmware, int frames) {
@@ -61,7 +40,7 @@ TEST(FirmwareRigCalibration, ADoublePressAndAWandMendAKnockedRigAndKeepItOnFlash
     auto sim = makeBoard("wand", 1);
     const StereoRig truth = sim->world.rig();
     // The cameras were knocked: the rig the board starts with is 0.5 degrees and 2 mm off.
-    const StereoRig believed = knocked(truth, 2.0, 0.5);
+    const StereoRig believed = test::knockedRig(truth, 2.0, 0.5);
     FirmwareConfig config;
     config.rig.duration_s = kWandSeconds;
     Firmware firmware(config, sim->board, believed);
@@ -109,8 +88,8 @@ TEST(FirmwareRigCalibration, ADoublePressAndAWandMendAKnockedRigAndKeepItOnFlash
     EXPECT_NE(firmware.lastEvent().find("saved to flash"), std::string::npos);
     EXPECT_EQ(firmware.counters().rigCalibrationsAdopted, 1u);
     EXPECT_TRUE(sim->statusLed.isOn()) << "a good rig: the LED stays on for 1.5 s";
-    EXPECT_LT(rotationError_deg(firmware.rig(), truth), 0.01);
-    EXPECT_LT(positionError_mm(firmware.rig(), truth), 0.1);
+    EXPECT_LT(test::cameraOneTurn_deg(firmware.rig(), truth), 0.01);
+    EXPECT_LT(test::cameraOneShift_mm(firmware.rig(), truth), 0.1);
 
     // Tracking with the new rig: stereo finds the whole wand again.
     const double after = markersPerFrame(firmware, 200);
@@ -123,20 +102,20 @@ TEST(FirmwareRigCalibration, ADoublePressAndAWandMendAKnockedRigAndKeepItOnFlash
     RigStore store(sim->rigFlash);
     const Result<StoredRig> stored = store.load();
     ASSERT_TRUE(stored) << stored.error().message;
-    EXPECT_LT(rotationError_deg(stored->rig, firmware.rig()), 1e-9);
+    EXPECT_LT(test::cameraOneTurn_deg(stored->rig, firmware.rig()), 1e-9);
     firmware.stop();
     Firmware restarted(config, sim->board, believed);
     restarted.start();
     EXPECT_NE(restarted.flashReport().find("rig from flash slot A (save #1)"), std::string::npos)
         << restarted.flashReport();
-    EXPECT_LT(rotationError_deg(restarted.rig(), truth), 0.01);
+    EXPECT_LT(test::cameraOneTurn_deg(restarted.rig(), truth), 0.01);
 }
 
 TEST(FirmwareRigCalibration, AKnockedRigRaisesTheDriftWarning) {
     auto sim = makeBoard("wand", 2);
     FirmwareConfig config;
     // The cameras moved by 0.1 degrees: markers still match, but off their epipolar lines.
-    Firmware firmware(config, sim->board, knocked(sim->world.rig(), 0.3, 0.1));
+    Firmware firmware(config, sim->board, test::knockedRig(sim->world.rig(), 0.3, 0.1));
     firmware.start();
     runFrames(firmware, 300);
     EXPECT_GT(firmware.epipolarRms_px(), config.rig.driftWarning_px) << firmware.lastEvent();
@@ -168,7 +147,7 @@ TEST(FirmwareRigCalibration, AWandSessionWithoutTheWandLeavesTheRigAlone) {
 }
 
 TEST(FirmwareRigCalibration, APowerCutAtEveryWriteOfARigSaveLeavesTheOldOrTheNewRig) {
-    const StereoRig oldRig = knocked(sim::makeRig({}), 1.0, 0.2);
+    const StereoRig oldRig = test::knockedRig(sim::makeRig({}), 1.0, 0.2);
     const StereoRig newRig = sim::makeRig({});
     std::uint64_t operations = 0;
     {
@@ -185,17 +164,17 @@ TEST(FirmwareRigCalibration, APowerCutAtEveryWriteOfARigSaveLeavesTheOldOrTheNew
         for (std::uint64_t cut = 0; cut <= operations; ++cut) {
             sim::SimFlash flash(64u << 10, 4096);
             RigStore store(flash);
-            ASSERT_TRUE(store.save(knocked(newRig, 5.0, 1.0), 0.9));
+            ASSERT_TRUE(store.save(test::knockedRig(newRig, 5.0, 1.0), 0.9));
             ASSERT_TRUE(store.save(oldRig, 0.3));
             flash.cutPowerAfter(cut, torn);
             EXPECT_EQ(static_cast<bool>(store.save(newRig, 0.05)), cut >= operations);
             flash.restorePower();
             const Result<StoredRig> loaded = RigStore(flash).load();
             ASSERT_TRUE(loaded) << "cut " << cut << ": " << loaded.error().message;
-            const bool isOld =
-                rotationError_deg(loaded->rig, oldRig) < 1e-9 && loaded->reprojectionRms_px == 0.3;
-            const bool isNew =
-                rotationError_deg(loaded->rig, newRig) < 1e-9 && loaded->reprojectionRms_px == 0.05;
+            const bool isOld = test::cameraOneTurn_deg(loaded->rig, oldRig) < 1e-9 &&
+                               loaded->reprojectionRms_px == 0.3;
+            const bool isNew = test::cameraOneTurn_deg(loaded->rig, newRig) < 1e-9 &&
+                               loaded->reprojectionRms_px == 0.05;
             EXPECT_TRUE(isOld || isNew) << "cut " << cut << ", torn " << torn;
             oldLoads += isOld;
             newLoads += isNew;

@@ -10,6 +10,7 @@
 #include "firmware_app/formats/recording.hpp"
 #include "firmware_app/tools/sim_command.hpp"
 #include "hal/sim/scene.hpp"
+#include "tests/support/rig_knock.hpp"
 #include "tests/support/temp_dir.hpp"
 #include "tests/tools/mocaprasp.hpp"
 
@@ -37,23 +38,6 @@ CliRun edgetrackCli(std::vector<std::string> args) {
     return run;
 }
 
-/// \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted axis.
-StereoRig disturbed(const StereoRig& rig, double offset_mm, double turn_deg) {
-    CameraExtrinsics ex = rig.camera(1).extrinsics();
-    ex.rotation_cam_from_rig =
-        Eigen::AngleAxisd(turn_deg * M_PI / 180.0, Vec3(0.6, 0.8, 0.0)).toRotationMatrix() *
-        ex.rotation_cam_from_rig;
-    ex.translation_cam_from_rig_mm += offset_mm * Vec3(0.48, -0.6, 0.64);
-    return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
-}
-
-double rotationError_deg(const StereoRig& a, const StereoRig& b) {
-    return Eigen::AngleAxisd(a.camera(1).extrinsics().rotation_cam_from_rig *
-                             b.camera(1).extrinsics().rotation_cam_from_rig.transpose())
-               .angle() *
-           180.0 / M_PI;
-}
-
 /// The number after \a label in \a text ("reprojection RMS 0.055 px" -> 0.055).
 double numberAfter(const std::string& text, const std::string& label, std::size_t from = 0) {
     const std::size_t at = text.find(label, from);
@@ -66,19 +50,25 @@ constexpr int kWandFrames = 1500; // 15 s: the emulator runs 20 times slower
 constexpr int kWandFrames = 3000; // 30 s, as the figure
 #endif
 
-} // namespace
-
-TEST(RigCalibrateCommand, SimulatedWandFromAStartFiftyMillimetresAndFiveDegreesOff) {
-    test::TempDir dir;
+/// A simulated wand session at blobs level in \a dir/wand (its rig.toml is the truth).
+app::SimRecordingOptions wandRecording(const test::TempDir& dir) {
     app::SimRecordingOptions sim;
     sim.scene = "wand";
     sim.frames = kWandFrames;
     sim.out = dir.path() / "wand";
     sim.level = recording::Level::Blobs;
-    ASSERT_TRUE(app::writeSimRecording(sim));
+    EXPECT_TRUE(app::writeSimRecording(sim));
+    return sim;
+}
+
+} // namespace
+
+TEST(RigCalibrateCommand, SimulatedWandFromAStartFiftyMillimetresAndFiveDegreesOff) {
+    test::TempDir dir;
+    const app::SimRecordingOptions sim = wandRecording(dir);
     const Result<StereoRig> truth = recording::readRig(sim.out / "rig.toml");
     ASSERT_TRUE(truth);
-    const StereoRig start = disturbed(*truth, 50.0, 5.0);
+    const StereoRig start = test::knockedRig(*truth, 50.0, 5.0);
     ASSERT_TRUE(recording::writeRig(sim.out / "rig.toml", start));
 
     const fs::path out = dir.path() / "found.toml";
@@ -87,7 +77,7 @@ TEST(RigCalibrateCommand, SimulatedWandFromAStartFiftyMillimetresAndFiveDegreesO
     ASSERT_EQ(run.exit, 0) << run.err;
     const Result<StereoRig> found = recording::readRig(out);
     ASSERT_TRUE(found) << found.error().message;
-    EXPECT_LT(rotationError_deg(*found, *truth), 0.01) << run.out;
+    EXPECT_LT(test::cameraOneTurn_deg(*found, *truth), 0.01) << run.out;
     EXPECT_LT((found->camera(1).centre_rig_mm() - truth->camera(1).centre_rig_mm()).norm(), 0.1)
         << run.out;
     // The simulator's blob noise, 0.05 px per coordinate, leaves 0.054 px after the fit takes
@@ -100,15 +90,10 @@ TEST(RigCalibrateCommand, SimulatedWandFromAStartFiftyMillimetresAndFiveDegreesO
 
 TEST(RigCalibrateCommand, RefinedIntrinsicsOfTheSimulatedCameras) {
     test::TempDir dir;
-    app::SimRecordingOptions sim;
-    sim.scene = "wand";
-    sim.frames = kWandFrames;
-    sim.out = dir.path() / "wand";
-    sim.level = recording::Level::Blobs;
-    ASSERT_TRUE(app::writeSimRecording(sim));
+    const app::SimRecordingOptions sim = wandRecording(dir);
     const Result<StereoRig> truth = recording::readRig(sim.out / "rig.toml");
     ASSERT_TRUE(truth);
-    const StereoRig moved = disturbed(*truth, 20.0, 2.0);
+    const StereoRig moved = test::knockedRig(*truth, 20.0, 2.0);
     std::array<CameraModel, 2> cameras{moved.camera(0), moved.camera(1)};
     for (CameraModel& camera : cameras) {
         CameraIntrinsics in = camera.intrinsics();

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "core/rig_calibration.hpp"
+#include "tests/support/rig_knock.hpp"
 #include "tests/unit/rig_fixtures.hpp"
 
 using namespace edgetrack;
@@ -48,26 +49,6 @@ Session waveWand(const StereoRig& rig, const WandSpec& wand, int frames, double 
     return session;
 }
 
-/// \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted axis.
-StereoRig disturbed(const StereoRig& rig, double offset_mm, double turn_deg) {
-    CameraExtrinsics ex = rig.camera(1).extrinsics();
-    const Mat3 turn =
-        Eigen::AngleAxisd(turn_deg * M_PI / 180.0, Vec3(0.6, 0.8, 0.0)).toRotationMatrix();
-    ex.rotation_cam_from_rig = turn * ex.rotation_cam_from_rig;
-    ex.translation_cam_from_rig_mm += offset_mm * Vec3(0.48, -0.6, 0.64);
-    return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
-}
-
-double rotationError_deg(const StereoRig& a, const StereoRig& b) {
-    const Eigen::AngleAxisd d(a.camera(1).extrinsics().rotation_cam_from_rig *
-                              b.camera(1).extrinsics().rotation_cam_from_rig.transpose());
-    return d.angle() * 180.0 / M_PI;
-}
-
-double positionError_mm(const StereoRig& a, const StereoRig& b) {
-    return (a.camera(1).centre_rig_mm() - b.camera(1).centre_rig_mm()).norm();
-}
-
 } // namespace
 
 TEST(RigCalibration, FindsCameraOnesPoseFromAFarStart) {
@@ -75,13 +56,13 @@ TEST(RigCalibration, FindsCameraOnesPoseFromAFarStart) {
     const WandSpec wand = WandSpec::fromSpacings(kWand);
     const double sigma_px = 0.05;
     const Session session = waveWand(truth, wand, 600, sigma_px, 1);
-    const StereoRig start = disturbed(truth, 50.0, 5.0);
-    ASSERT_GT(rotationError_deg(start, truth), 4.9);
+    const StereoRig start = test::knockedRig(truth, 50.0, 5.0);
+    ASSERT_GT(test::cameraOneTurn_deg(start, truth), 4.9);
 
     const Result<RigCalibrationResult> result = calibrateRig(start, wand, session.pairs, {});
     ASSERT_TRUE(result) << result.error().message;
-    EXPECT_LT(rotationError_deg(result->rig, truth), 0.01);
-    EXPECT_LT(positionError_mm(result->rig, truth), 0.1);
+    EXPECT_LT(test::cameraOneTurn_deg(result->rig, truth), 0.01);
+    EXPECT_LT(test::cameraOneShift_mm(result->rig, truth), 0.1);
     const RigCalibrationReport& report = result->report;
     EXPECT_EQ(report.framesUsed, 600u);
     // A marker's 2D error has RMS sigma * sqrt(2); each wand pose takes 5 of its 12 numbers.
@@ -97,7 +78,7 @@ TEST(RigCalibration, RefinedIntrinsicsFindTheFocalLengths) {
     const StereoRig truth = test::desktopRig();
     const WandSpec wand = WandSpec::fromSpacings(kWand);
     const Session session = waveWand(truth, wand, 800, 0.05, 2);
-    StereoRig start = disturbed(truth, 30.0, 2.0);
+    StereoRig start = test::knockedRig(truth, 30.0, 2.0);
     std::array<CameraModel, 2> cameras{start.camera(0), start.camera(1)};
     for (CameraModel& camera : cameras) {
         CameraIntrinsics in = camera.intrinsics();
@@ -118,8 +99,8 @@ TEST(RigCalibration, RefinedIntrinsicsFindTheFocalLengths) {
         EXPECT_NEAR(found.fx_px / real.fx_px, 1.0, 0.001) << "camera " << c;
         EXPECT_NEAR(found.fy_px / real.fy_px, 1.0, 0.001) << "camera " << c;
     }
-    EXPECT_LT(rotationError_deg(result->rig, truth), 0.02);
-    EXPECT_LT(positionError_mm(result->rig, truth), 0.3);
+    EXPECT_LT(test::cameraOneTurn_deg(result->rig, truth), 0.02);
+    EXPECT_LT(test::cameraOneShift_mm(result->rig, truth), 0.3);
 
     // Without refinement the wrong focal lengths stay: the pose absorbs part of them, the
     // reprojection shows the rest.
@@ -136,12 +117,12 @@ TEST(RigCalibration, WrongSightingsAreRefusedAndDoNotPullTheRig) {
     for (std::size_t i = 0; i < session.pairs.size(); i += 10)
         session.pairs[i].sightings[1].pixels[1] += Vec2(6.0, -2.0);
     const Result<RigCalibrationResult> result =
-        calibrateRig(disturbed(truth, 20.0, 3.0), wand, session.pairs, {});
+        calibrateRig(test::knockedRig(truth, 20.0, 3.0), wand, session.pairs, {});
     ASSERT_TRUE(result) << result.error().message;
     EXPECT_EQ(result->report.framesRefused, 50u);
     EXPECT_EQ(result->report.framesUsed, 450u);
-    EXPECT_LT(rotationError_deg(result->rig, truth), 0.01);
-    EXPECT_LT(positionError_mm(result->rig, truth), 0.1);
+    EXPECT_LT(test::cameraOneTurn_deg(result->rig, truth), 0.01);
+    EXPECT_LT(test::cameraOneShift_mm(result->rig, truth), 0.1);
 }
 
 TEST(RigCalibration, ATwoMarkerWandNeedsTheStartOnlyToPairItsEnds) {
@@ -156,10 +137,10 @@ TEST(RigCalibration, ATwoMarkerWandNeedsTheStartOnlyToPairItsEnds) {
             if (random() % 2)
                 std::swap(s.pixels[0], s.pixels[1]);
     const Result<RigCalibrationResult> result =
-        calibrateRig(disturbed(truth, 40.0, 4.0), wand, session.pairs, {});
+        calibrateRig(test::knockedRig(truth, 40.0, 4.0), wand, session.pairs, {});
     ASSERT_TRUE(result) << result.error().message;
-    EXPECT_LT(rotationError_deg(result->rig, truth), 0.01);
-    EXPECT_LT(positionError_mm(result->rig, truth), 0.1);
+    EXPECT_LT(test::cameraOneTurn_deg(result->rig, truth), 0.01);
+    EXPECT_LT(test::cameraOneShift_mm(result->rig, truth), 0.1);
     // A wand lying along an epipolar line reads the same both ways: a few such pairs fit
     // neither reading well and are refused.
     EXPECT_GE(result->report.framesUsed, 590u);
@@ -202,7 +183,7 @@ TEST(RigCalibration, AssessingARigTellsTheTrueOneFromAMovedOne) {
 
     // Camera 1 knocked by 0.2 degrees and 1 mm: the wand poses cannot make up for it.
     const Result<RigCalibrationReport> knocked =
-        assessRig(disturbed(truth, 1.0, 0.2), wand, session.pairs, {});
+        assessRig(test::knockedRig(truth, 1.0, 0.2), wand, session.pairs, {});
     ASSERT_TRUE(knocked);
     EXPECT_GT(knocked->reprojectionRms_px[1], 10.0 * fits->reprojectionRms_px[1]);
 }
