@@ -14,8 +14,9 @@ namespace {
 class SimRunBoard : public RunBoard {
 public:
     SimRunBoard(sim::Scene scene, std::uint64_t seed, const sim::SimBoardOptions& options,
-                std::string sceneName)
+                std::string sceneName, const std::array<double, 2>& rigKnock)
         : sim_(std::move(scene), seed, options)
+        , believedRig_(sim::knockedRig(sim_.world.rig(), rigKnock[0], rigKnock[1]))
         , board_{sim_.clock, sim_.cameras,  sim_.ledRing, sim_.button, sim_.statusLed,
                  sim_.flash, sim_.rigFlash, sim_.can,     udp_}
         , sceneName_(std::move(sceneName)) {}
@@ -24,7 +25,8 @@ public:
     int udpErrno() const { return udp_.errnoAtOpen(); }
 
     hal::Board& board() override { return board_; }
-    const StereoRig& rig() const override { return sim_.world.rig(); }
+    /// The rig the firmware starts with: the scene's, unless [cameras] sim_rig_knock moved it.
+    const StereoRig& rig() const override { return believedRig_; }
     std::string describe() const override { return "simulated board, scene '" + sceneName_ + "'"; }
     bool hasTypedButton() const override { return true; }
     void press(hal::Nanoseconds duration) override {
@@ -38,6 +40,7 @@ public:
 
 private:
     sim::SimBoard sim_;
+    StereoRig believedRig_;
     // The simulated board's UDP is the host's: a DTrack client on this machine sees the poses.
     linux_hal::PosixUdpSender udp_;
     hal::Board board_;
@@ -63,7 +66,8 @@ Result<std::unique_ptr<RunBoard>> makeSimRunBoard(const FirmwareConfig& config,
     options.flashSize = config.flash.size_bytes;
     options.flashEraseBlock = config.flash.eraseBlock_bytes;
     options.rigFlashSize = config.flash.rigSize_bytes;
-    auto board = std::make_unique<SimRunBoard>(std::move(*made), seed, options, scene);
+    auto board = std::make_unique<SimRunBoard>(std::move(*made), seed, options, scene,
+                                               config.cameras.simRigKnock);
     if (!board->udpValid())
         return Error{std::string("cannot open a UDP socket: ") + std::strerror(board->udpErrno())};
     return std::unique_ptr<RunBoard>(std::move(board));

@@ -56,6 +56,7 @@ void readCameras(Section& s, CameraSettings& c) {
     s.real("timeout_s", c.timeout_s, 0.01, 60.0);
     s.real("retry_s", c.retry_s, 0.01, 600.0);
     s.path("rig", c.rigFile);
+    s.numbers("sim_rig_knock", c.simRigKnock);
     s.require(c.exposure_us * 1e-6 < 1.0 / c.frameRate_hz, "exposure_us",
               "must be shorter than the frame period");
     s.require(c.queueDepth < static_cast<std::size_t>(c.buffers), "queue_depth",

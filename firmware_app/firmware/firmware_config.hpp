@@ -1,6 +1,7 @@
 // The firmware's configuration (deploy/edgetrack.toml): every stage's settings, capacities and I/O.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -41,6 +42,10 @@ struct CameraSettings {
     double retry_s = 1.0;
     /// The stereo calibration (INTERFACES §2); empty on the simulated board (the scene's rig).
     std::filesystem::path rigFile;
+    /// Simulated board only: the board starts with the scene's rig knocked, camera 1 moved by
+    /// [0] mm and turned by [1] degrees, while the cameras render with the true one; a rig
+    /// calibration (double press, scene wand) mends it.
+    std::array<double, 2> simRigKnock{0.0, 0.0};
 
     bool operator==(const CameraSettings&) const = default;
 };

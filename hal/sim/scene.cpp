@@ -257,6 +257,16 @@ StereoRig makeRig(const RigSpec& spec) {
     return StereoRig(CameraModel(in, CameraExtrinsics{}), CameraModel(in1, ex1));
 }
 
+StereoRig knockedRig(const StereoRig& rig, double offset_mm, double turn_deg) {
+    CameraExtrinsics ex = rig.camera(1).extrinsics();
+    ex.rotation_cam_from_rig =
+        Eigen::AngleAxisd(turn_deg * std::numbers::pi / 180.0, Vec3(0.6, 0.8, 0.0))
+            .toRotationMatrix() *
+        ex.rotation_cam_from_rig;
+    ex.translation_cam_from_rig_mm += offset_mm * Vec3(0.48, -0.6, 0.64);
+    return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
+}
+
 // ---------------------------------------------------------------------------------------------
 
 namespace {

@@ -134,6 +134,11 @@ struct RigSpec {
 /// \brief Build the stereo rig of \a spec (camera 0 at the origin, camera 1 to its right).
 StereoRig makeRig(const RigSpec& spec);
 
+/// \brief \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted
+/// axis: the cameras after a knock, or a rig measured long ago. The board believes such a rig
+/// while the simulated cameras render with the true one.
+StereoRig knockedRig(const StereoRig& rig, double offset_mm, double turn_deg);
+
 struct SceneObject {
     MarkerObject object;
     Motion motion;

@@ -4,19 +4,13 @@
 #include <numbers>
 
 #include "core/stereo_rig.hpp"
+#include "hal/sim/scene.hpp"
 
 namespace edgetrack::test {
 
-/// \brief \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted
-/// axis: a starting guess far off, or the cameras after a knock.
+/// \brief The simulator's knock: camera 1 moved by \a offset_mm, turned by \a turn_deg.
 inline StereoRig knockedRig(const StereoRig& rig, double offset_mm, double turn_deg) {
-    CameraExtrinsics ex = rig.camera(1).extrinsics();
-    ex.rotation_cam_from_rig =
-        Eigen::AngleAxisd(turn_deg * std::numbers::pi / 180.0, Vec3(0.6, 0.8, 0.0))
-            .toRotationMatrix() *
-        ex.rotation_cam_from_rig;
-    ex.translation_cam_from_rig_mm += offset_mm * Vec3(0.48, -0.6, 0.64);
-    return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
+    return sim::knockedRig(rig, offset_mm, turn_deg);
 }
 
 /// \return the angle between the two rigs' camera 1 orientations (degrees).
