@@ -267,11 +267,33 @@ StereoRig knockedRig(const StereoRig& rig, double offset_mm, double turn_deg) {
     return StereoRig(rig.camera(0), CameraModel(rig.camera(1).intrinsics(), ex));
 }
 
+MarkerObject makeClusters() {
+    // Six clusters of two or three 10 mm spheres on posts, 10 to 16 mm apart in all three
+    // directions: turning, their images pass through every separation from overlapping to apart.
+    MarkerObject object;
+    object.name = "clusters";
+    object.markerDiameter_mm = 10.0;
+    Random random(4242);
+    for (int c = 0; c < 6; ++c) {
+        const double angle = c * std::numbers::pi / 3.0;
+        const Vec3 centre(55.0 * std::cos(angle), 55.0 * std::sin(angle), 8.0 * (c % 2));
+        const int count = 2 + c % 2;
+        object.markers.push_back({centre, Vec3::Zero()});
+        for (int k = 1; k < count; ++k) {
+            Vec3 direction(random.normal(), random.normal(), random.normal());
+            direction.normalize();
+            const double distance = object.markerDiameter_mm * random.uniform(1.3, 2.0);
+            object.markers.push_back({centre + distance * direction, Vec3::Zero()});
+        }
+    }
+    return object;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 namespace {
 
-constexpr std::array<SceneInfo, 13> kScenes{{
+constexpr std::array<SceneInfo, 14> kScenes{{
     {"two_cubes", "7 cm and 5 cm cubes, slow and erratic, occluding each other (paper Table 1)"},
     {"cube_sphere", "7 cm cube and 7 cm sphere turned slowly side by side (paper Figure 7)"},
     {"toy_car", "toy car with 38 markers turned slowly to show every side"},
@@ -282,6 +304,8 @@ constexpr std::array<SceneInfo, 13> kScenes{{
     {"hand_occlusion", "7 cm cube turned slowly while a hand passes in front of it"},
     {"slow_cube", "7 cm cube alone, turned slowly: a calibration session"},
     {"wand", "three-marker wand waved through the volume"},
+    {"touching", "clusters of markers 1-1.6 diameters apart turning, so that their images touch "
+                 "and overlap, with a passing hand"},
     {"three_cubes", "three 7 cm cubes turned side by side: calibration cost (paper section 7.1)"},
     {"random_object", "one random object (ellipsoid, plate, ring, posts, star, box or car; 4-40 "
                       "markers) drawn from the seed, with hand, glints and noise as drawn"},
@@ -398,6 +422,16 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
             m.wanderAmplitude_mm = {30.0, 25.0, 30.0};
             add(makeCube70(), m);
         }
+    } else if (name == "touching") {
+        add(makeClusters(), slowTurns({midline, 0.0, 520.0}));
+        MotionSpec hand;
+        hand.centre_rig_mm = {midline, 40.0, 430.0};
+        hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
+        hand.wanderFrequency_hz = 0.12;
+        hand.spinRate_radps = 0.0;
+        hand.tumbleRate_radps = 0.0;
+        hand.erraticShare = 0.0;
+        scene.occluders.push_back({Motion(hand, ++stream), 40.0});
     } else if (name == "wand") {
         // Waved as a rig calibration asks: through the whole shared view, near and far.
         MotionSpec m = erratic({midline, 0.0, 620.0});

@@ -47,6 +47,8 @@ MarkerObject makeCube50();
 MarkerObject makeSphere70();
 /// The paper's toy car with 38 markers on body and cabin.
 MarkerObject makeToyCar();
+/// Six clusters of two or three 10 mm spheres 1 to 1.6 diameters apart: images that touch.
+MarkerObject makeClusters();
 /// A wand with three spherical markers on a line, 55 and 102 mm apart.
 MarkerObject makeWand();
 

@@ -40,9 +40,38 @@ struct Totals {
     std::uint64_t continuedMarkerFrames = 0;
     std::uint64_t idBreaks = 0;
     std::uint64_t idSwaps = 0;
+    /// Markers in an image whose disc touches or overlaps another marker's (camera-images).
+    std::uint64_t markerImages = 0;
+    std::uint64_t touchingImages = 0;
+    /// Found from exact blobs: every visible marker's true centre a blob of its own.
+    std::uint64_t foundFromExactBlobs = 0;
+    /// Parts of split blobs: within 1.5 px of a visible marker's true centre (and their error),
+    /// or not.
+    std::uint64_t splitParts = 0;
+    std::uint64_t splitPartsAstray = 0;
+    double splitSquaredError = 0.0;
 };
 
+/// Points of \a points within kFoundRadius_mm of a distinct true marker seen by both cameras.
+std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points);
+
 constexpr double kFoundRadius_mm = 2.0;
+
+std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points) {
+    std::vector<bool> used(points.size(), false);
+    std::uint64_t found = 0;
+    for (const sim::MarkerView& truth : observation.markers) {
+        if (!truth.visible[0] || !truth.visible[1])
+            continue;
+        for (std::size_t k = 0; k < points.size(); ++k)
+            if (!used[k] && (points[k] - truth.position_rig_mm).norm() < kFoundRadius_mm) {
+                used[k] = true;
+                ++found;
+                break;
+            }
+    }
+    return found;
+}
 
 } // namespace
 
@@ -79,6 +108,8 @@ int main(int argc, char** argv) {
     const sim::World world(std::move(*scene), seed);
     test::SimImagePipeline images(world, seed, pipelineConfig);
     const MarkerPipeline& pipeline = images.pipeline();
+    // The same stereo on exact blobs: each visible marker's true centre, nothing merged.
+    MarkerPipeline exactBlobs(world.rig(), pipelineConfig);
     MarkerTracker tracker(trackConfig);
     std::vector<Vec3> points;
     sim::Observation observation;
@@ -98,6 +129,43 @@ int main(int argc, char** argv) {
         sim::separatelyVisible(observation, visible);
         for (const sim::MarkerView& m : observation.markers)
             totals.visibleToBoth += (m.visible[0] && m.visible[1]) ? 1u : 0u;
+
+        for (int c = 0; c < 2; ++c) {
+            const auto camera = static_cast<std::size_t>(c);
+            BoundedVector<Blob>& blobs = exactBlobs.blobs(c);
+            blobs.clear();
+            for (const sim::MarkerView& m : observation.markers) {
+                if (!m.visible[camera])
+                    continue;
+                Blob b;
+                b.centre_px = m.pixel[camera];
+                blobs.push_back(b);
+                ++totals.markerImages;
+                for (const sim::MarkerView& other : observation.markers)
+                    if (&other != &m && other.visible[camera] &&
+                        (other.pixel[camera] - m.pixel[camera]).norm() <
+                            m.radius_px[camera] + other.radius_px[camera]) {
+                        ++totals.touchingImages;
+                        break;
+                    }
+            }
+            for (const Blob& b : pipeline.blobs(c)) {
+                if (!b.split)
+                    continue;
+                double nearest = 1e9;
+                for (const sim::MarkerView& m : observation.markers)
+                    if (m.visible[camera])
+                        nearest = std::min(nearest, (m.pixel[camera] - b.centre_px).norm());
+                if (nearest < 1.5) {
+                    ++totals.splitParts;
+                    totals.splitSquaredError += nearest * nearest;
+                } else {
+                    ++totals.splitPartsAstray;
+                }
+            }
+        }
+        exactBlobs.matchStereo();
+        totals.foundFromExactBlobs += countFound(observation, exactBlobs.points_rig_mm());
         const std::size_t markerCount = observation.markers.size();
         std::vector<bool> used(points.size(), false);
         idOfTruth.clear();
@@ -198,6 +266,19 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(totals.visibleToBoth),
                 100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /
                     static_cast<double>(std::max<std::uint64_t>(1, totals.visibleToBoth)));
+    std::printf("  markers touching another in their image: %.1f%%; found from exact blobs "
+                "%llu, at images level %.2f%% of that\n",
+                100.0 * static_cast<double>(totals.touchingImages) /
+                    static_cast<double>(std::max<std::uint64_t>(1, totals.markerImages)),
+                static_cast<unsigned long long>(totals.foundFromExactBlobs),
+                100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /
+                    static_cast<double>(std::max<std::uint64_t>(1, totals.foundFromExactBlobs)));
+    std::printf("  split blobs' parts: %llu at a marker, RMS %.3f px from its true centre; %llu "
+                "astray\n",
+                static_cast<unsigned long long>(totals.splitParts),
+                std::sqrt(totals.splitSquaredError /
+                          static_cast<double>(std::max<std::uint64_t>(1, totals.splitParts))),
+                static_cast<unsigned long long>(totals.splitPartsAstray));
     std::printf("  missed: %llu without a blob in some camera, %llu by stereo\n",
                 static_cast<unsigned long long>(totals.missedNoBlob),
                 static_cast<unsigned long long>(totals.missedByStereo));
