@@ -150,6 +150,7 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     // A split blob gives up to three candidates in place of one.
     candidates_ = BoundedVector<Candidate>(3 * config.maxLabels);
     notRound_ = BoundedVector<std::uint32_t>(config.maxLabels);
+    maybeMerged_ = BoundedVector<std::uint32_t>(config.maxLabels);
     constexpr auto kSplitPixels = static_cast<std::size_t>(kSplitSide * kSplitSide);
     splitMask_ = std::make_unique<std::uint8_t[]>(kSplitPixels);
     splitDistance_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
@@ -386,6 +387,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
                              BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     candidates_.clear();
     notRound_.clear();
+    maybeMerged_.clear();
     for (std::size_t label = 0; label < labels_.size(); ++label) {
         if (!labels_.isRoot(label))
             continue;
@@ -398,20 +400,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
             ++counters_.rejectedLarge;
             continue;
         }
-        // Shape from the pixel distribution (unweighted: the saturated core carries no shape);
-        // +1/12 is each pixel's own extent.
-        const double n = static_cast<double>(m.count);
-        const double meanX = static_cast<double>(m.sumX) / n;
-        const double meanY = static_cast<double>(m.sumY) / n;
-        const double xx = static_cast<double>(m.sumXX) / n - meanX * meanX + 1.0 / 12.0;
-        const double yy = static_cast<double>(m.sumYY) / n - meanY * meanY + 1.0 / 12.0;
-        const double xy = static_cast<double>(m.sumXY) / n - meanX * meanY;
-        const double half = 0.5 * (xx + yy);
-        const double spread = std::sqrt(0.25 * (xx - yy) * (xx - yy) + xy * xy);
-        const double major = half + spread, minor = std::max(half - spread, 1e-9);
-        const double elongation = std::sqrt(major / minor);
-        // A uniform ellipse with these moments covers 4 pi sqrt(major * minor) pixels.
-        const double fill = n / (4.0 * 3.14159265358979323846 * std::sqrt(major * minor));
+        const auto [elongation, fill] = shapeOf(m);
         // Candidates keep the order of their labels (top rows first); the parts of a split blob
         // take the next three places.
         const auto order = static_cast<std::uint32_t>(label) * 4U;
@@ -421,13 +410,11 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
                 notRound_.push_back(static_cast<std::uint32_t>(label));
             continue;
         }
-        Blob blob = framedBlob(m);
-        const double weight = static_cast<double>(m.sumI);
-        blob.centre_px = {static_cast<double>(m.sumIx) / weight,
-                          static_cast<double>(m.sumIy) / weight};
-        blob.area_px = static_cast<float>(n);
-        blob.elongation = static_cast<float>(elongation);
-        addCandidate(blob, order);
+        if (config_.splitMerged && elongation > kMaybeMergedElongation) {
+            maybeMerged_.push_back(static_cast<std::uint32_t>(label));
+            continue;
+        }
+        addCandidate(roundBlob(m), order);
     }
 
     // Blobs of touching discs split into their discs, after the round ones: when those already
@@ -435,19 +422,32 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
     // the work, as only they could take a place.
     const double near2 = config_.keepNear_px * config_.keepNear_px;
     const bool crowded = candidates_.size() >= out.capacity();
-    for (const std::uint32_t label : notRound_) {
-        const Moments& m = moments_[label];
+    const auto worthSplitting = [&](const Moments& m) {
+        if (!crowded)
+            return true;
         const Vec2 centre(static_cast<double>(m.sumX) / static_cast<double>(m.count),
                           static_cast<double>(m.sumY) / static_cast<double>(m.count));
         // A blob of two discs lies off either disc's centre by up to about its own size.
         const double reach2 = near2 + 0.25 * static_cast<double>(m.count);
-        const bool expected = nearestExpected2(centre, expected_px, reach2) < reach2;
-        if (crowded && !expected)
+        return nearestExpected2(centre, expected_px, reach2) < reach2;
+    };
+    for (const std::uint32_t label : notRound_) {
+        const Moments& m = moments_[label];
+        if (!worthSplitting(m))
             continue;
         if (splitIntoDiscs(m, pixels, stride_bytes, label * 4U))
             ++counters_.splitBlobs;
         else
             ++counters_.splitRefused;
+    }
+    // Two discs far over each other pass the roundness tests; their outline is still two arcs.
+    // Such a blob stays one blob unless two discs fit it.
+    for (const std::uint32_t label : maybeMerged_) {
+        const Moments& m = moments_[label];
+        if (worthSplitting(m) && splitIntoDiscs(m, pixels, stride_bytes, label * 4U, 2))
+            ++counters_.splitBlobs;
+        else
+            addCandidate(roundBlob(m), label * 4U);
     }
 
     const std::size_t room = out.capacity();
@@ -484,8 +484,34 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
     }
 }
 
+BlobDetector::Shape BlobDetector::shapeOf(const Moments& m) {
+    // From the pixel distribution (unweighted: the saturated core carries no shape); +1/12 is
+    // each pixel's own extent.
+    const double n = static_cast<double>(m.count);
+    const double meanX = static_cast<double>(m.sumX) / n;
+    const double meanY = static_cast<double>(m.sumY) / n;
+    const double xx = static_cast<double>(m.sumXX) / n - meanX * meanX + 1.0 / 12.0;
+    const double yy = static_cast<double>(m.sumYY) / n - meanY * meanY + 1.0 / 12.0;
+    const double xy = static_cast<double>(m.sumXY) / n - meanX * meanY;
+    const double half = 0.5 * (xx + yy);
+    const double spread = std::sqrt(0.25 * (xx - yy) * (xx - yy) + xy * xy);
+    const double major = half + spread, minor = std::max(half - spread, 1e-9);
+    // A uniform ellipse with these moments covers 4 pi sqrt(major * minor) pixels.
+    return {std::sqrt(major / minor),
+            n / (4.0 * 3.14159265358979323846 * std::sqrt(major * minor))};
+}
+
+Blob BlobDetector::roundBlob(const Moments& m) {
+    Blob blob = framedBlob(m);
+    const double weight = static_cast<double>(m.sumI);
+    blob.centre_px = {static_cast<double>(m.sumIx) / weight, static_cast<double>(m.sumIy) / weight};
+    blob.area_px = static_cast<float>(m.count);
+    blob.elongation = static_cast<float>(shapeOf(m).elongation);
+    return blob;
+}
+
 bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
-                                  std::uint32_t order) {
+                                  std::uint32_t order, std::size_t minParts) {
     // The blob on a grid of its bounding box with a frame of one pixel: a cut disc at the image's
     // border is no disc to fit.
     const int w = m.right - m.left + 1, h = m.bottom - m.top + 1;
@@ -676,7 +702,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
                      circle[k].rms <= kSplitFitRms_px && circle[k].radius >= 1.0;
         parts += trusted[k] ? 1U : 0U;
     }
-    if (parts == 0)
+    if (parts == 0 || parts < minParts)
         return false;
     for (std::size_t k = 0; k < count; ++k) {
         if (!trusted[k])

@@ -112,12 +112,21 @@ private:
     void emitBlobs(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
                    std::span<const Vec2> expected_px);
     /// Split a blob that is not round into the two or three discs it is made of, as candidates
-    /// (those that can be centred with confidence); false when none can.
+    /// (those that can be centred with confidence); false when fewer than \a minParts can.
     bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
-                        std::uint32_t order);
+                        std::uint32_t order, std::size_t minParts = 1);
     bool addCandidate(const Blob& blob, std::uint32_t order);
     /// A blob with the bounds and peak of component \a m, to be given its centre and shape.
     static Blob framedBlob(const Moments& m);
+    struct Shape {
+        /// Ratio of the principal axes of the pixel distribution (1 for a disc).
+        double elongation;
+        /// Share of the moment ellipse the pixels fill (1 for a disc).
+        double fill;
+    };
+    static Shape shapeOf(const Moments& m);
+    /// Component \a m as one blob, centred on its intensity-weighted mean.
+    static Blob roundBlob(const Moments& m);
 
     BlobDetectorConfig config_;
     int width_;
@@ -141,10 +150,16 @@ private:
     BoundedVector<Candidate> candidates_;
     /// Labels of this image's blobs that are not round, to be split once the round ones are known.
     BoundedVector<std::uint32_t> notRound_;
+    /// Round enough to pass as one disc, yet a little long: maybe two discs over each other.
+    BoundedVector<std::uint32_t> maybeMerged_;
     /// Scratch of splitIntoDiscs, for a bounding box of at most kSplitSide x kSplitSide pixels.
     static constexpr int kSplitSide = 64;
     /// A split part's circle must fit its outline points this well (px RMS).
     static constexpr double kSplitFitRms_px = 0.3;
+    /// A blob round enough to pass as one disc but longer than this may be two discs far over
+    /// each other (a disc's own pixels measure 1.00 to 1.05): it is split when two discs fit
+    /// its outline, and stays one blob otherwise.
+    static constexpr double kMaybeMergedElongation = 1.08;
     std::unique_ptr<std::uint8_t[]> splitMask_;
     std::unique_ptr<std::uint16_t[]> splitDistance_;
     std::unique_ptr<std::uint16_t[]> splitStack_;

@@ -245,6 +245,38 @@ TEST(BlobDetector, SplitsTouchingDiscsIntoTheirCentres) {
     EXPECT_EQ(c.splitRefused, 1u) << "the streak";
 }
 
+TEST(BlobDetector, SplitsDiscsFarOverEachOtherThatPassAsRound) {
+    // Two discs 0.3 to 0.4 diameters apart make a blob round enough to pass the roundness
+    // tests (elongation under 1.35, fill over 0.75): its outline is still two arcs, and two
+    // circles fit it. A single disc, a little oval from its pixels, stays one blob at its centre.
+    Image image(640, 480);
+    const std::vector<sim::Glint> discs = {
+        disc(100.3, 100.6, 6.0),  disc(104.1, 101.4, 6.0), // 0.32 diameters apart
+        disc(250.45, 200.2, 5.0), disc(252.9, 202.6, 5.0), // 0.34, diagonal
+        disc(400.2, 300.7, 6.0),  disc(404.9, 300.3, 5.0), // 0.39 of the larger, unequal
+        disc(550.0, 400.0, 5.0)};                          // alone
+    drawSpots(image, discs);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(detector.counters().rejectedNotRound, 0u) << "every blob passes as round";
+    ASSERT_EQ(blobs.size(), discs.size());
+    // Far over each other, a disc keeps less of its own outline: within 0.25 px each, 0.15 RMS.
+    double sum2 = 0.0;
+    for (const sim::Glint& d : discs) {
+        const Blob* nearest = &blobs[0];
+        for (const Blob& b : blobs)
+            if ((b.centre_px - d.centre_px).norm() < (nearest->centre_px - d.centre_px).norm())
+                nearest = &b;
+        const double error = (nearest->centre_px - d.centre_px).norm();
+        EXPECT_LT(error, 0.25) << "disc at " << d.centre_px.transpose();
+        sum2 += error * error;
+    }
+    EXPECT_LT(std::sqrt(sum2 / static_cast<double>(discs.size())), 0.15);
+    EXPECT_EQ(detector.counters().splitBlobs, 3u);
+    EXPECT_EQ(detector.counters().splitParts, 6u);
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
