@@ -327,13 +327,10 @@ Scene makeRandomScene(int objectCount, std::uint64_t seed) {
                                  Motion(m, seed * 1000 + static_cast<std::uint64_t>(k) + 1)});
     }
     if (random.chance(0.5)) {
-        MotionSpec hand;
-        hand.centre_rig_mm = {midline, random.uniform(-30.0, 30.0), depth - 100.0};
-        hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
-        hand.wanderFrequency_hz = random.uniform(0.1, 0.2);
-        hand.spinRate_radps = 0.0;
-        hand.tumbleRate_radps = 0.0;
-        hand.erraticShare = 0.0;
+        // Drawn one after the other, in this order: the seed's scene stays the same.
+        const Vec3 centre(midline, random.uniform(-30.0, 30.0), depth - 100.0);
+        const double frequency_hz = random.uniform(0.1, 0.2);
+        const MotionSpec hand = passingHand(centre, frequency_hz);
         scene.occluders.push_back({Motion(hand, seed * 1000 + 99), random.uniform(30.0, 45.0)});
     }
     if (random.chance(1.0 / 3.0))

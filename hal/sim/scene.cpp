@@ -257,6 +257,17 @@ StereoRig makeRig(const RigSpec& spec) {
     return StereoRig(CameraModel(in, CameraExtrinsics{}), CameraModel(in1, ex1));
 }
 
+MotionSpec passingHand(const Vec3& centre_rig_mm, double frequency_hz) {
+    MotionSpec hand;
+    hand.centre_rig_mm = centre_rig_mm;
+    hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
+    hand.wanderFrequency_hz = frequency_hz;
+    hand.spinRate_radps = 0.0;
+    hand.tumbleRate_radps = 0.0;
+    hand.erraticShare = 0.0;
+    return hand;
+}
+
 StereoRig knockedRig(const StereoRig& rig, double offset_mm, double turn_deg) {
     CameraExtrinsics ex = rig.camera(1).extrinsics();
     ex.rotation_cam_from_rig =
@@ -406,14 +417,8 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
         add(makeCube70(), m);
     } else if (name == "hand_occlusion") {
         add(makeCube70(), slowTurns({midline, 0.0, 580.0}));
-        MotionSpec hand;
-        hand.centre_rig_mm = {midline, 30.0, 470.0};
-        hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
-        hand.wanderFrequency_hz = 0.15;
-        hand.spinRate_radps = 0.0;
-        hand.tumbleRate_radps = 0.0;
-        hand.erraticShare = 0.0;
-        scene.occluders.push_back({Motion(hand, ++stream), 40.0});
+        scene.occluders.push_back(
+            {Motion(passingHand({midline, 30.0, 470.0}, 0.15), ++stream), 40.0});
     } else if (name == "slow_cube") {
         add(makeCube70(), slowTurns({midline, 0.0, 560.0}));
     } else if (name == "three_cubes") {
@@ -424,14 +429,8 @@ std::optional<Scene> makeScene(std::string_view name, std::uint64_t seed) {
         }
     } else if (name == "touching") {
         add(makeClusters(), slowTurns({midline, 0.0, 520.0}));
-        MotionSpec hand;
-        hand.centre_rig_mm = {midline, 40.0, 430.0};
-        hand.wanderAmplitude_mm = {150.0, 40.0, 20.0};
-        hand.wanderFrequency_hz = 0.12;
-        hand.spinRate_radps = 0.0;
-        hand.tumbleRate_radps = 0.0;
-        hand.erraticShare = 0.0;
-        scene.occluders.push_back({Motion(hand, ++stream), 40.0});
+        scene.occluders.push_back(
+            {Motion(passingHand({midline, 40.0, 430.0}, 0.12), ++stream), 40.0});
     } else if (name == "wand") {
         // Waved as a rig calibration asks: through the whole shared view, near and far.
         MotionSpec m = erratic({midline, 0.0, 620.0});

@@ -133,6 +133,10 @@ struct RigSpec {
     double k2 = 0.02;
 };
 
+/// \brief A hand passing in front of the objects: it wanders sideways about \a centre_rig_mm
+/// at \a frequency_hz, without turning.
+MotionSpec passingHand(const Vec3& centre_rig_mm, double frequency_hz);
+
 /// \brief Build the stereo rig of \a spec (camera 0 at the origin, camera 1 to its right).
 StereoRig makeRig(const RigSpec& spec);
 
