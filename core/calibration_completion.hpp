@@ -226,6 +226,11 @@ private:
     OneBodyFit fitAsOneBody(const SessionBuffer& session, std::span<const std::size_t> sharedFrames,
                             const Body& a, const Body& b, bool alone,
                             const RigidTransform& T_a_from_b) const;
+    /// \brief Whether \a a and \a b, as one body by \a T_a_from_b, move on at no more than
+    /// the speed either was seen to move wherever one piece leaves view and the other comes in
+    /// (each found alone): a likeness of two objects puts the one body in two places at once.
+    bool movesOnSmoothly(const SessionBuffer& session, const Body& a, const Body& b,
+                         const RigidTransform& T_a_from_b) const;
     /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
     /// with, if there were enough.
     std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,

@@ -29,6 +29,18 @@ constexpr std::size_t kMinHandovers = 3;
 /// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
 /// four markers of one random layout already land on four of another by chance.
 constexpr double kRegistrationTolerance_mm = 0.5;
+/// A triangle shared by two pieces ties them only when no other pair of their triangles comes
+/// within this many registration tolerances on every side.
+constexpr double kTriangleUniqueness = 4.0;
+/// Side comparisons a search for a shared triangle makes at most (two pieces of 30 markers each
+/// have 4,060 triangles; a likeness among them is then nearly certain and the search stops).
+constexpr std::size_t kTriangleComparisons = 2000000;
+/// A piece leaving and another coming into view within this many frames is a handover whose
+/// motion two pieces tied by a triangle must explain.
+constexpr std::size_t kSmoothGap_frames = 10;
+/// How much faster than either piece was ever seen to move a body may seem to move across a
+/// handover.
+constexpr double kSpeedMargin = 1.5;
 
 } // namespace
 
@@ -134,9 +146,28 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // Or, never in view together, one piece of a turning body may come into view just
                 // as the other leaves: the pose of the one, carried on at its speed, then lands
                 // on the other's pose by one relative pose, every time it happens.
-                if ((T_into_from_from = consensus(true).T_into_from_from))
+                // Or they share exactly three markers and are never in view together beyond
+                // them: the triangle is their only tie. It is taken only when no other triangle
+                // of either is like it, and when the body the two would make moves on smoothly
+                // wherever one piece leaves and the other comes into view (a likeness between
+                // two objects puts the one body in two places at once). Pieces found alone
+                // together that did not move as one are not tied by a likeness.
+                const Consensus lone = consensus(true);
+                auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
+                    if (lone.shared >= config_.minSharedFrames)
+                        return std::nullopt;
+                    const std::optional<RigidTransform> tied = soleSharedTriangle(
+                        from.markers_mm, into.markers_mm, kRegistrationTolerance_mm,
+                        kTriangleUniqueness * kRegistrationTolerance_mm, kTriangleComparisons);
+                    if (!tied || !movesOnSmoothly(session, into, from, *tied))
+                        return std::nullopt;
+                    return tied;
+                };
+                if ((T_into_from_from = lone.T_into_from_from))
                     ++counters_.joinedByMotion;
                 else if ((T_into_from_from = layoutPlacement()))
+                    ++counters_.joinedByLayout;
+                else if ((T_into_from_from = sharedTriangle()))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from = relativePoseAcrossHandovers(session, into, from)))
                     ++counters_.joinedByHandover;
@@ -290,6 +321,55 @@ CalibrationCompletion::OneBodyFit CalibrationCompletion::fitAsOneBody(
         result.T_into_from_from = placed->transform;
     }
     return result;
+}
+
+bool CalibrationCompletion::movesOnSmoothly(const SessionBuffer& session, const Body& a,
+                                            const Body& b, const RigidTransform& T_a_from_b) const {
+    const std::size_t frames = session.frames();
+    const Extent ball = extentOf(a.markers_mm);
+    const RigidTransform T_b_from_a = T_a_from_b.inverse();
+    // a's pose in frame f, from whichever piece was found there alone.
+    auto poseOfA = [&](std::size_t f) {
+        return a.posedAlone[f] ? a.T_rig_from_body_alone[f]
+                               : b.T_rig_from_body_alone[f] * T_b_from_a;
+    };
+    // The fastest either piece was seen to move between consecutive frames (mm/s at a's ball).
+    double fastest_mm_per_s = 0.0;
+    for (std::size_t f = 1; f < frames; ++f) {
+        const double dt_s = session.time_s(f) - session.time_s(f - 1);
+        if (dt_s <= 0.0)
+            continue;
+        for (const Body* piece : {&a, &b})
+            if (piece->posedAlone[f] && piece->posedAlone[f - 1])
+                fastest_mm_per_s = std::max(
+                    fastest_mm_per_s, disagreement_mm(poseOfA(f - 1), poseOfA(f), ball) / dt_s);
+    }
+    // Each frame where one piece alone was found, and the next frame within kSmoothGap_frames
+    // where only the other was: the one body must get there at no more than that speed.
+    std::size_t handovers = 0, smooth = 0;
+    auto only = [&](const Body& piece, const Body& other, std::size_t f) {
+        return piece.posedAlone[f] && !other.posedAlone[f];
+    };
+    for (const auto& [leaving, coming] :
+         {std::pair<const Body*, const Body*>{&a, &b}, std::pair<const Body*, const Body*>{&b, &a}})
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!only(*leaving, *coming, f))
+                continue;
+            for (std::size_t g = f + 1; g < frames && g <= f + kSmoothGap_frames; ++g) {
+                if (only(*leaving, *coming, g))
+                    break; // the leaving piece is still there: the handover is later
+                if (!only(*coming, *leaving, g))
+                    continue;
+                ++handovers;
+                const double limit_mm =
+                    kSpeedMargin * fastest_mm_per_s * (session.time_s(g) - session.time_s(f)) +
+                    2.0 * config_.sameBodyTolerance_mm;
+                if (disagreement_mm(poseOfA(f), poseOfA(g), ball) <= limit_mm)
+                    ++smooth;
+                break;
+            }
+        }
+    return static_cast<double>(smooth) >= config_.sameBodyShare * static_cast<double>(handovers);
 }
 
 std::optional<RigidTransform>

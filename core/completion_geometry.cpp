@@ -180,6 +180,58 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
     return best;
 }
 
+std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
+                                                 std::span<const Vec3> whole, double tolerance_mm,
+                                                 double uniqueness_mm, std::size_t budget) {
+    auto trianglesOf = [](std::span<const Vec3> m) {
+        std::vector<SortedTriangle> all;
+        const auto n = static_cast<std::uint32_t>(m.size());
+        for (std::uint32_t i = 0; i < n; ++i)
+            for (std::uint32_t j = i + 1; j < n; ++j)
+                for (std::uint32_t k = j + 1; k < n; ++k)
+                    all.push_back(sortedTriangle(m[i], m[j], m[k], i, j, k));
+        return all;
+    };
+    if (part.size() < 3 || whole.size() < 3)
+        return std::nullopt;
+    const std::vector<SortedTriangle> ofPart = trianglesOf(part);
+    std::vector<SortedTriangle> ofWhole = trianglesOf(whole);
+    auto longest = [](const SortedTriangle& t) { return t.sides_mm[2]; };
+    std::sort(
+        ofWhole.begin(), ofWhole.end(),
+        [&](const SortedTriangle& a, const SortedTriangle& b) { return longest(a) < longest(b); });
+    const SortedTriangle* soleOfPart = nullptr;
+    const SortedTriangle* soleOfWhole = nullptr;
+    std::size_t compared = 0;
+    for (const SortedTriangle& t : ofPart) {
+        auto it =
+            std::lower_bound(ofWhole.begin(), ofWhole.end(), longest(t) - uniqueness_mm,
+                             [&](const SortedTriangle& w, double v) { return longest(w) < v; });
+        for (; it != ofWhole.end() && longest(*it) <= longest(t) + uniqueness_mm; ++it) {
+            if (++compared > budget)
+                return std::nullopt;
+            if (!congruent(t, *it, uniqueness_mm))
+                continue;
+            if (soleOfPart != nullptr)
+                return std::nullopt; // a second likeness: the shared triangle is no identity
+            soleOfPart = &t;
+            soleOfWhole = &*it;
+        }
+    }
+    if (soleOfPart == nullptr || !congruent(*soleOfPart, *soleOfWhole, tolerance_mm) ||
+        !wellShaped(*soleOfPart, tolerance_mm))
+        return std::nullopt;
+    std::array<Vec3, 3> from, to;
+    for (std::size_t c = 0; c < 3; ++c) {
+        from[c] = part[soleOfPart->corners[c]];
+        to[c] = whole[soleOfWhole->corners[c]];
+    }
+    const std::optional<RigidFit> fit = fitRigid(from, to);
+    if (!fit)
+        return std::nullopt;
+    return fit->transform;
+}
+
 SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
                               std::uint32_t ib, std::uint32_t ic) {
     std::array<std::pair<double, std::uint32_t>, 3> facing = {

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -61,6 +62,21 @@ struct Registration {
  */
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
                             double tolerance_mm, double matchTolerance_mm);
+
+/**
+ * \brief The placement of \a part in \a whole by the one triangle the two layouts share.
+ *
+ * Two pieces of one body that are never in view together beyond three shared markers are tied by
+ * those three alone. A triangle is no identity when another is like it, so this asks that exactly
+ * one triangle of \a part has sides within \a uniqueness_mm of one of \a whole (every triangle of
+ * both counted, flat or not), that the two agree within \a tolerance_mm, and that the triangle's
+ * corners are told apart by its sides and it is not flat (wellShaped at \a tolerance_mm). Gives up
+ * (nothing) after \a budget side comparisons: large layouts have chance likenesses anyway.
+ * Independent of the order of either layout's markers.
+ */
+std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
+                                                 std::span<const Vec3> whole, double tolerance_mm,
+                                                 double uniqueness_mm, std::size_t budget);
 
 /// Three markers or points, their corners ordered by the side facing each, shortest first (mm):
 /// two congruent scalene triangles list their corresponding corners in the same order.

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -102,6 +103,37 @@ TEST(LayoutRegistration, SaysWhenASelfSimilarLayoutTakesAPieceInSeveralPlaces) {
         completion_detail::registerLayout(square, grid, 2.0, 0.5);
     EXPECT_EQ(r.matched, 4U);
     EXPECT_EQ(r.runnerUp, 4U);
+}
+
+// Two pieces that share exactly three markers: the shared triangle places one on the other,
+// whatever the order of either's markers; a second triangle like it in the whole makes the
+// likeness no identity.
+TEST(LayoutRegistration, PlacesAPieceByTheOneTriangleItSharesUnlessAnotherIsLikeIt) {
+    const std::vector<Vec3> whole = test::irregularLayout(8, 31, 15.0);
+    RigidTransform moved;
+    moved.rotation = Quat(Eigen::AngleAxisd(1.1, Vec3(0.6, -0.2, 1.0).normalized()));
+    moved.translation_mm = Vec3(-40.0, 8.0, 300.0);
+    // The piece: three markers of the whole and three of its own, far from the whole's.
+    const std::array<std::size_t, 3> shared{6, 1, 4};
+    std::vector<Vec3> piece{moved.apply(Vec3(0.0, 0.0, 150.0)),
+                            moved.apply(Vec3(35.0, 0.0, 170.0))};
+    for (const std::size_t m : shared)
+        piece.push_back(moved.apply(whole[m]));
+    piece.push_back(moved.apply(Vec3(10.0, 40.0, 190.0)));
+    const std::optional<RigidTransform> placed =
+        completion_detail::soleSharedTriangle(piece, whole, 0.5, 2.0, 1000000);
+    ASSERT_TRUE(placed.has_value());
+    for (std::size_t i = 0; i < shared.size(); ++i)
+        EXPECT_LT((placed->apply(piece[2 + i]) - whole[shared[i]]).norm(), 1e-6);
+
+    // The same three markers once more, elsewhere in the whole: two places fit.
+    std::vector<Vec3> twice = whole;
+    RigidTransform elsewhere;
+    elsewhere.rotation = Quat(Eigen::AngleAxisd(2.0, Vec3::UnitZ()));
+    elsewhere.translation_mm = Vec3(0.0, 0.0, 400.0);
+    for (const std::size_t m : shared)
+        twice.push_back(elsewhere.apply(whole[m]));
+    EXPECT_FALSE(completion_detail::soleSharedTriangle(piece, twice, 0.5, 2.0, 1000000));
 }
 
 TEST(SessionBuffer, KeepsEachFrameInOneOrderAndRefusesWhatDoesNotFit) {
@@ -257,6 +289,53 @@ TEST(CalibrationCompletion, JoinsTwoPiecesNeverSeenTogetherThatShareFourMarkers)
     ASSERT_EQ(completion.run(session, seeds, out), 1U);
     EXPECT_EQ(completion.counters().joinedByLayout, 1U);
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
+// Two pieces of one body that share exactly three markers, seen twenty seconds apart with
+// nothing in view between: no frame poses both and no chain of frames leads from one to the
+// other. The triangle they share, like no other of either, is the only tie, and it holds.
+TEST(CalibrationCompletion, JoinsTwoPiecesThatShareOnlyATriangleSeenFarApartInTime) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 26, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 12, [](std::size_t, std::size_t m, double t) {
+            return t < 4.0 ? m <= 6 : t >= 6.0 && m >= 4;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    // The condition of the scene: the shared triangle (markers 4, 5, 6) is the pieces' only tie.
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 4, 6), subset(body, 0, 7), 0.5,
+                                                      2.0, 1000000));
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 4, 6)});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 1U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 1U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
+// Two objects with a triangle of markers alike, one coming into view 50 ms after the other left,
+// 120 mm away: as one body they would jump faster than either was ever seen to move, so the
+// likeness does not join them.
+TEST(CalibrationCompletion, KeepsTwoObjectsWithALikeTriangleApart) {
+    const std::vector<Vec3> a = test::irregularLayout(7, 24, 15.0);
+    std::vector<Vec3> b{Vec3(0.0, 0.0, 0.0), Vec3(38.0, 5.0, 0.0), Vec3(12.0, 41.0, 9.0)};
+    RigidTransform apart;
+    apart.rotation = Quat(Eigen::AngleAxisd(0.8, Vec3(1.0, 0.3, 0.0).normalized()));
+    apart.translation_mm = Vec3(20.0, -70.0, 30.0);
+    for (std::size_t m = 0; m < 3; ++m)
+        b.push_back(apart.apply(a[m]));
+    const SessionBuffer session =
+        sessionWhere({a, b}, 10.0, 0.05, 13, [](std::size_t body, std::size_t, double t) {
+            return body == 0 ? t < 5.0 : t >= 5.05;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    // The condition of the scene: without the motion, the likeness would tie them.
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(b, a, 0.5, 2.0, 1000000));
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({a, b}), out), 2U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 0U);
+    EXPECT_LT(layoutError_mm(out[0], a), 0.1);
+    EXPECT_LT(layoutError_mm(out[1], b), 0.1);
 }
 
 // A piece of a body that is later seen only by three of its markers, and beside them, every
