@@ -23,6 +23,13 @@ constexpr double kDegree = std::numbers::pi / 180.0;
 /// its markers: for a 3D normal scatter the median distance is 1.5 sigma, so 3 times it holds all
 /// but one point in a thousand.
 constexpr double kScatterFactor = 3.0;
+/// Frames in which the cameras look at a place as it was seen, less than this apart, are one pass
+/// by it (s).
+constexpr double kPassGap_s = 0.1;
+/// A place seen in fewer frames than minSeenShare of those that look at it is a marker when it
+/// was there in at least this share of at least kMinPasses passes.
+constexpr std::uint32_t kMinPasses = 3;
+constexpr double kPassShare = 2.0 / 3.0;
 
 } // namespace
 
@@ -175,6 +182,16 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     const double sameView = std::cos(config_.sameViewAngle_deg * kDegree);
     const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
     const double radius2 = placeRadius_mm_ * placeRadius_mm_;
+    // The stretches of frames in which the cameras look at a place as they once saw it (gaps of
+    // up to passGap frames bridged), and in how many of them it was there at all.
+    struct Passes {
+        std::uint32_t lastFrame = UINT32_MAX;
+        std::uint32_t count = 0;
+        std::uint32_t seen = 0;
+        bool seenInThis = false;
+    };
+    std::vector<Passes> passes(n);
+    const auto passGap = static_cast<std::size_t>(std::ceil(kPassGap_s * frameRate_hz_));
     for (int pass = 0; pass < 2; ++pass) {
         for (std::size_t f = 0; f < frames; ++f) {
             if (!body.posed[f])
@@ -201,6 +218,16 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
                 if (seenFromNear(directions, view, sameView)) {
                     ++expected[k];
                     seenWhenExpected[k] += isHit ? 1U : 0U;
+                    Passes& p = passes[k];
+                    if (p.lastFrame == UINT32_MAX || f > p.lastFrame + passGap) {
+                        ++p.count;
+                        p.seenInThis = false;
+                    }
+                    if (isHit && !p.seenInThis) {
+                        p.seenInThis = true;
+                        ++p.seen;
+                    }
+                    p.lastFrame = static_cast<std::uint32_t>(f);
                 }
             }
             for (std::size_t i = 0; i < hitNow.size(); ++i)
@@ -212,8 +239,16 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     for (std::size_t k = 0; k < n; ++k) {
         if (seen[k] < minHits)
             continue;
-        if (expected[k] > 0 && static_cast<double>(seenWhenExpected[k]) <
-                                   config_.minSeenShare * static_cast<double>(expected[k]))
+        // Seen whenever the cameras look at it as before: in minSeenShare of those frames, or,
+        // for a marker at the edge of its view (one camera sees it, the other not) or often
+        // behind a passing hand, in most of several passes by it. A point that rode along for a
+        // while is there in one pass and missing in the others.
+        const bool seenInShare = static_cast<double>(seenWhenExpected[k]) >=
+                                 config_.minSeenShare * static_cast<double>(expected[k]);
+        const bool seenInPasses =
+            passes[k].count >= kMinPasses && static_cast<double>(passes[k].seen) >=
+                                                 kPassShare * static_cast<double>(passes[k].count);
+        if (expected[k] > 0 && !seenInShare && !seenInPasses)
             continue;
         if (accepted.size() == config_.maxMarkersPerModel) {
             ++counters_.markerOverflow;

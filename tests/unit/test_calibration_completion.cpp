@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <optional>
 #include <random>
 #include <vector>
@@ -465,6 +466,49 @@ TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
     ASSERT_EQ(completion.run(session, seeds, out), 1U);
     EXPECT_EQ(out[0].markers_model_mm.size(), body.size());
     EXPECT_LT(layoutError_mm(out[0], body), 0.05);
+}
+
+// A marker at the edge of its view, or often behind a passing hand: whenever the turning body
+// shows it to the cameras it is there in only every fourth frame, a quarter of the frames that
+// look at it as it was seen. It is there in every pass, so it is a marker, unlike a point that
+// rode along in one pass only.
+TEST(CalibrationCompletion, KeepsAMarkerSeenInEveryPassThoughInFewOfItsFrames) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
+    const Vec3 flicker_body_mm(55.0, 10.0, -5.0);
+    const Vec3 normal_body = flicker_body_mm.normalized();
+    const std::size_t frames = 3000;
+    SessionBuffer session(frames, frames * 16);
+    std::mt19937 random(5);
+    std::normal_distribution<double> noise(0.0, 0.05);
+    std::vector<Vec3> points;
+    std::size_t passes = 0, lastFacing = 0;
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        const RigidTransform pose = turning(t, Vec3(0.0, 0.0, 600.0), 0.0);
+        points.clear();
+        for (const Vec3& m : body)
+            points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
+        const Vec3 toCameras_body =
+            (pose.inverse().apply(Vec3::Zero()) - flicker_body_mm).normalized();
+        if (toCameras_body.dot(normal_body) > std::cos(50.0 * std::numbers::pi / 180.0)) {
+            if (passes == 0 || f > lastFacing + 10)
+                ++passes;
+            lastFacing = f;
+            if (f % 4 == 0)
+                points.push_back(pose.apply(flicker_body_mm) +
+                                 Vec3(noise(random), noise(random), noise(random)));
+        }
+        session.append(t, points);
+    }
+    ASSERT_GE(passes, 3U) << "the body shows the marker again and again";
+    const CompletionConfig config;
+    ASSERT_GT(config.minSeenShare, 0.25) << "a quarter of its frames is too few by share alone";
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({body}), out), 1U);
+    std::vector<Vec3> withFlicker = body;
+    withFlicker.push_back(flicker_body_mm);
+    EXPECT_LT(layoutError_mm(out[0], withFlicker), 0.1);
 }
 
 // The same frames with each frame's points in four other orders give the same models, bit for bit
