@@ -33,6 +33,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                                        std::span<MarkerModel> out) {
     counters_ = {};
     bodies_.clear();
+    nextBodyId_ = 0;
     const std::size_t frames = session.frames();
     if (!valid_ || frames < 2)
         return 0;
@@ -55,6 +56,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
             continue;
         }
         Body& body = bodies_.emplace_back();
+        body.id = nextBodyId_++;
         for (const Vec3& m : seed.markers_model_mm) {
             if (body.markers_mm.size() == config_.maxMarkersPerModel) {
                 ++counters_.markerOverflow;

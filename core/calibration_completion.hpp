@@ -173,6 +173,11 @@ private:
         std::vector<RigidTransform> T_rig_from_body_alone;
         std::vector<std::uint8_t> posedAlone;
         bool alive = true;
+        /// Stable over the rounds (bodies_ is sorted): which body this is.
+        std::uint32_t id = 0;
+        /// Ids of the bodies found with it in many frames at changing relative poses: other
+        /// objects, whose points are never this one's markers.
+        std::vector<std::uint32_t> apartFrom;
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
     };
@@ -226,6 +231,9 @@ private:
     OneBodyFit fitAsOneBody(const SessionBuffer& session, std::span<const std::size_t> sharedFrames,
                             const Body& a, const Body& b, bool alone,
                             const RigidTransform& T_a_from_b) const;
+    /// \brief Whether \a b's centre wanders about in \a a's frame over the frames the joint
+    /// tracker found both in: two objects, not two pieces of one.
+    bool wandersApart(const Body& a, const Body& b) const;
     /// \brief Whether \a a and \a b, as one body by \a T_a_from_b, move on at no more than
     /// the speed either was seen to move wherever one piece leaves view and the other comes in
     /// (each found alone): a likeness of two objects puts the one body in two places at once.
@@ -250,6 +258,7 @@ private:
     bool valid_ = false;
     CompletionCounters counters_{};
     std::vector<Body> bodies_;
+    std::uint32_t nextBodyId_ = 0;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
     /// The place radius of the body being measured (mm).

@@ -132,6 +132,7 @@ void CalibrationCompletion::discoverBodies(const SessionBuffer& session) {
         // A new body, in the rig frame of the window's first frame; the tracker then finds it
         // wherever else it is, and the rounds that follow complete it like any seed.
         Body& body = bodies_.emplace_back();
+        body.id = nextBodyId_++;
         for (std::size_t i = 0; i < n; ++i)
             if ((clique >> i) & 1U)
                 body.markers_mm.push_back(tracks[i][0]);

@@ -41,6 +41,10 @@ constexpr std::size_t kSmoothGap_frames = 10;
 /// How much faster than either piece was ever seen to move a body may seem to move across a
 /// handover.
 constexpr double kSpeedMargin = 1.5;
+/// Two bodies found together are two objects when the one's centre lies, in most of those
+/// frames, farther than this many same-body tolerances from where it lies in the other's frame
+/// (component-wise median).
+constexpr double kWanderFactor = 2.0;
 
 } // namespace
 
@@ -126,7 +130,15 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             std::optional<RigidTransform> T_into_from_from = joint.T_into_from_from;
             if (T_into_from_from) {
                 ++counters_.joinedByMotion;
-            } else if (joint.shared < config_.minSharedFrames) {
+            } else if (joint.shared >= config_.minSharedFrames) {
+                // Found together often, and not as one body. Two objects, when the one's centre
+                // wanders about in the other's frame: a piece of one body found now in one
+                // attitude, now in another (a square of four markers) turns about its own centre.
+                if (wandersApart(into, from)) {
+                    into.apartFrom.push_back(from.id);
+                    from.apartFrom.push_back(into.id);
+                }
+            } else {
                 // Seldom found at once jointly: pieces that share markers, whose shared points the
                 // joint tracker gives to one of them. Each found alone, they move as one.
                 trackAlone(a);
@@ -321,6 +333,32 @@ CalibrationCompletion::OneBodyFit CalibrationCompletion::fitAsOneBody(
         result.T_into_from_from = placed->transform;
     }
     return result;
+}
+
+bool CalibrationCompletion::wandersApart(const Body& a, const Body& b) const {
+    const Vec3 centre_b = extentOf(b.markers_mm).centre;
+    std::vector<Vec3> centres_a;
+    for (std::size_t f = 0; f < a.posed.size() && f < b.posed.size(); ++f)
+        if (a.posed[f] && b.posed[f])
+            centres_a.push_back(
+                a.T_rig_from_body[f].inverse().apply(b.T_rig_from_body[f].apply(centre_b)));
+    if (centres_a.size() < config_.minSharedFrames)
+        return false;
+    auto median = [](std::vector<double>& v) {
+        const auto middle = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+        std::nth_element(v.begin(), middle, v.end());
+        return *middle;
+    };
+    std::vector<double> values(centres_a.size());
+    Vec3 middle;
+    for (Eigen::Index axis = 0; axis < 3; ++axis) {
+        for (std::size_t i = 0; i < centres_a.size(); ++i)
+            values[i] = centres_a[i][axis];
+        middle[axis] = median(values);
+    }
+    for (std::size_t i = 0; i < centres_a.size(); ++i)
+        values[i] = (centres_a[i] - middle).norm();
+    return median(values) > kWanderFactor * config_.sameBodyTolerance_mm;
 }
 
 bool CalibrationCompletion::movesOnSmoothly(const SessionBuffer& session, const Body& a,

@@ -117,13 +117,29 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     const Extent extent = extentOf(body.markers_mm);
     const double reach = extent.radius_mm + config_.reach_mm;
     const double reach2 = reach * reach;
+    // A point on a marker of another object found in the same frame is that object's: markers of
+    // one that sat still against this one for a while (objects turning slowly side by side) are
+    // no markers of this one. Only objects known to move apart from it: a piece of this body
+    // holds markers this one has yet to learn.
+    std::vector<Vec3> claimed;
+    const double claim2 = placeRadius_mm_ * placeRadius_mm_;
     for (std::size_t f = 0; f < frames; ++f) {
         if (!body.posed[f])
             continue;
+        claimed.clear();
+        for (const Body& other : bodies_)
+            if (other.alive && other.posed[f] &&
+                std::find(body.apartFrom.begin(), body.apartFrom.end(), other.id) !=
+                    body.apartFrom.end())
+                for (const Vec3& m : other.markers_mm)
+                    claimed.push_back(other.T_rig_from_body[f].apply(m));
         const RigidTransform T_body_from_rig = body.T_rig_from_body[f].inverse();
         for (const Vec3& p : session.points(f)) {
             const Vec3 q = T_body_from_rig.apply(p);
             if ((q - extent.centre).squaredNorm() > reach2)
+                continue;
+            if (std::any_of(claimed.begin(), claimed.end(),
+                            [&](const Vec3& c) { return (c - p).squaredNorm() <= claim2; }))
                 continue;
             std::int32_t s = siteNear(q);
             if (s < 0) {

@@ -511,6 +511,46 @@ TEST(CalibrationCompletion, KeepsAMarkerSeenInEveryPassThoughInFewOfItsFrames) {
     EXPECT_LT(layoutError_mm(out[0], withFlicker), 0.1);
 }
 
+// Two objects side by side, each turning on its own, except for 0.6 s in which the second keeps
+// still against the first: its markers then sit at places of the first's frame, in a look at
+// that side of the first that the session never repeats, so no later frame tells them from the
+// first's markers. But the second's own pose puts its markers on those points, and the two are
+// found together at wandering relative poses the rest of the time: they are the second's.
+TEST(CalibrationCompletion, LeavesOutMarkersOfAnotherObjectThatKeptStillAgainstIt) {
+    const std::vector<Vec3> a = test::irregularLayout(8, 41, 15.0);
+    const std::vector<Vec3> b = test::irregularLayout(6, 42, 15.0);
+    const std::size_t frames = 500;
+    SessionBuffer session(frames, frames * 16);
+    std::mt19937 random(6);
+    std::normal_distribution<double> noise(0.0, 0.05);
+    auto poseA = [](double t) { return turning(t, Vec3(-60.0, 0.0, 600.0), 0.0); };
+    auto poseB = [](double t) { return turning(t, Vec3(60.0, 0.0, 600.0), 1.3, Vec3::UnitX()); };
+    // b against a while it keeps still: as it was when it stopped moving on its own.
+    const RigidTransform T_a_from_b = poseA(1.0).inverse() * poseB(1.0);
+    std::vector<Vec3> points;
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        const bool still = t >= 1.0 && t < 1.6;
+        const RigidTransform rig_from_a = poseA(t);
+        const RigidTransform rig_from_b = still ? rig_from_a * T_a_from_b : poseB(t);
+        points.clear();
+        for (const Vec3& m : a)
+            points.push_back(rig_from_a.apply(m) +
+                             Vec3(noise(random), noise(random), noise(random)));
+        for (const Vec3& m : b)
+            points.push_back(rig_from_b.apply(m) +
+                             Vec3(noise(random), noise(random), noise(random)));
+        session.append(t, points);
+    }
+    const CompletionConfig config;
+    ASSERT_LT(config.minSeen_s, 0.6) << "b's markers sit still against a long enough to count";
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({a, b}), out), 2U);
+    EXPECT_LT(layoutError_mm(out[0], a), 0.1);
+    EXPECT_LT(layoutError_mm(out[1], b), 0.1);
+}
+
 // The same frames with each frame's points in four other orders give the same models, bit for bit
 // the online stage and completion both put every frame in one order first.
 TEST(CalibrationCompletion, SameModelsWhateverTheOrderOfPointsInAFrame) {
