@@ -211,6 +211,11 @@ int main(int argc, char** argv) {
     CalibrationConfig config;
     app.add_option("--edge-break", config.edgeBreak_mm, "edge break threshold (mm)");
     app.add_option("--edge-window", config.edgeWindow_frames, "N of the running distance");
+    app.add_option("--max-objects", config.maxObjects, "object graphs alive at once")
+        ->check(CLI::Range(1, 1024));
+    app.add_option("--max-markers-per-object", config.maxMarkersPerObject,
+                   "markers per object graph")
+        ->check(CLI::Range(4, 128));
     CLI11_PARSE(app, argc, argv);
 
     std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
