@@ -23,7 +23,7 @@ struct CalibrationConfig {
     /// Frame-to-frame correspondence that gives markers their IDs (step 1).
     FrameToFrameConfig tracking{};
     /// Objects (graphs) alive at once, the whole scene at the start included.
-    std::size_t maxObjects = 16;
+    std::size_t maxObjects = 32;
     /// Markers per object graph; at most MarkerSet::kCapacity (128).
     std::size_t maxMarkersPerObject = 96;
     /// Markers known at once over all objects, occluded ones included.
