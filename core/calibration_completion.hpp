@@ -106,7 +106,7 @@ struct CompletionCounters {
     /// Bodies found in the session's points that no seed explained.
     std::uint64_t discovered = 0;
     /// Objects joined because they moved as one body, or because one's layout lies in the other's
-    /// and they were never seen apart.
+    /// (four or more markers, or the one triangle they share) and they were never seen apart.
     std::uint64_t joinedByMotion = 0;
     std::uint64_t joinedByLayout = 0;
     /// Objects never seen at once joined because one came into view as the other left, every

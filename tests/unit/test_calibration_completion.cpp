@@ -318,7 +318,10 @@ TEST(CalibrationCompletion, JoinsTwoPiecesThatShareOnlyATriangleSeenFarApartInTi
 // likeness does not join them.
 TEST(CalibrationCompletion, KeepsTwoObjectsWithALikeTriangleApart) {
     const std::vector<Vec3> a = test::irregularLayout(7, 24, 15.0);
-    std::vector<Vec3> b{Vec3(0.0, 0.0, 0.0), Vec3(38.0, 5.0, 0.0), Vec3(12.0, 41.0, 9.0)};
+    // b's own markers lie farther from each other and from its copy of a's triangle than any two
+    // markers of a (within +-40 mm), so that no other triangle of b is like one of a's, whatever
+    // layout the platform's random numbers give a.
+    std::vector<Vec3> b{Vec3(0.0, 0.0, 200.0), Vec3(190.0, 25.0, 210.0), Vec3(60.0, 205.0, 245.0)};
     RigidTransform apart;
     apart.rotation = Quat(Eigen::AngleAxisd(0.8, Vec3(1.0, 0.3, 0.0).normalized()));
     apart.translation_mm = Vec3(20.0, -70.0, 30.0);
