@@ -137,6 +137,16 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
     return count;
 }
 
+void CalibrationCompletion::markersOfOthersAt(std::size_t f, const Body& body, OtherBodies which,
+                                              std::vector<Vec3>& out) const {
+    out.clear();
+    for (const Body& other : bodies_)
+        if (&other != &body && other.alive && other.posed[f] &&
+            (which == OtherBodies::All || body.isApartFrom(other.id)))
+            for (const Vec3& m : other.markers_mm)
+                out.push_back(other.T_rig_from_body[f].apply(m));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Tracking every body through the session
 

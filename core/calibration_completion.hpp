@@ -1,6 +1,7 @@
 // Completion of a calibration session: the provisional models tracked through all its frames.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -178,6 +179,9 @@ private:
         /// Ids of the bodies found with it in many frames at changing relative poses: other
         /// objects, whose points are never this one's markers.
         std::vector<std::uint32_t> apartFrom;
+        bool isApartFrom(std::uint32_t other) const {
+            return std::find(apartFrom.begin(), apartFrom.end(), other) != apartFrom.end();
+        }
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
     };
@@ -196,6 +200,13 @@ private:
         std::vector<std::uint8_t>* posed;
         std::vector<RigidTransform>* T_rig_from_body;
     };
+    /// Which other bodies markersOfOthersAt() looks at: every one, or those known to be other
+    /// objects (Body::apartFrom).
+    enum class OtherBodies { All, KnownApart };
+    /// \brief Where the alive bodies other than \a body that were found in frame \a f put their
+    /// markers (rig frame, mm), into \a out (cleared first).
+    void markersOfOthersAt(std::size_t f, const Body& body, OtherBodies which,
+                           std::vector<Vec3>& out) const;
     /// \brief Every alive body tracked together (bodies_ sorted alive first, largest first).
     void trackAll(const SessionBuffer& session);
     /// \brief \a models tracked together through the session forwards and backwards; model k's

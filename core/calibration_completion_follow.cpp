@@ -54,17 +54,8 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
     // Where the other bodies found in frame f have their markers (rig frame): a point there is
     // theirs, as the joint tracker gives no point to two bodies.
     std::vector<Vec3> claimed;
-    auto claim = [&](std::size_t f) {
-        claimed.clear();
-        for (const Body& other : bodies_)
-            if (&other != &body && other.alive && other.posed[f])
-                for (const Vec3& m : other.markers_mm)
-                    claimed.push_back(other.T_rig_from_body[f].apply(m));
-    };
-    auto isClaimed = [&](const Vec3& p) {
-        return std::any_of(claimed.begin(), claimed.end(),
-                           [&](const Vec3& c) { return (c - p).squaredNorm() <= radius * radius; });
-    };
+    auto claim = [&](std::size_t f) { markersOfOthersAt(f, body, OtherBodies::All, claimed); };
+    auto isClaimed = [&](const Vec3& p) { return nearAny(claimed, p, radius * radius); };
     // Points of frame f near the body and off every anchor become anchors; those on one count.
     auto collect = [&](std::size_t f, const RigidTransform& T_rig_from_body) {
         const RigidTransform T_body_from_rig = T_rig_from_body.inverse();

@@ -134,7 +134,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // Found together often, and not as one body. Two objects, when the one's centre
                 // wanders about in the other's frame: a piece of one body found now in one
                 // attitude, now in another (a square of four markers) turns about its own centre.
-                if (wandersApart(into, from)) {
+                if (wandersApart(into, from) && !into.isApartFrom(from.id)) {
                     into.apartFrom.push_back(from.id);
                     from.apartFrom.push_back(into.id);
                 }
@@ -344,21 +344,16 @@ bool CalibrationCompletion::wandersApart(const Body& a, const Body& b) const {
                 a.T_rig_from_body[f].inverse().apply(b.T_rig_from_body[f].apply(centre_b)));
     if (centres_a.size() < config_.minSharedFrames)
         return false;
-    auto median = [](std::vector<double>& v) {
-        const auto middle = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-        std::nth_element(v.begin(), middle, v.end());
-        return *middle;
-    };
     std::vector<double> values(centres_a.size());
     Vec3 middle;
     for (Eigen::Index axis = 0; axis < 3; ++axis) {
         for (std::size_t i = 0; i < centres_a.size(); ++i)
             values[i] = centres_a[i][axis];
-        middle[axis] = median(values);
+        middle[axis] = medianOf(values);
     }
     for (std::size_t i = 0; i < centres_a.size(); ++i)
         values[i] = (centres_a[i] - middle).norm();
-    return median(values) > kWanderFactor * config_.sameBodyTolerance_mm;
+    return medianOf(values) > kWanderFactor * config_.sameBodyTolerance_mm;
 }
 
 bool CalibrationCompletion::movesOnSmoothly(const SessionBuffer& session, const Body& a,

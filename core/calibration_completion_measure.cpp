@@ -101,9 +101,7 @@ double CalibrationCompletion::placeRadiusOf(const SessionBuffer& session, const 
     }
     if (distances.empty())
         return config_.siteRadius_mm;
-    const auto middle = distances.begin() + static_cast<std::ptrdiff_t>(distances.size() / 2);
-    std::nth_element(distances.begin(), middle, distances.end());
-    return std::clamp(kScatterFactor * *middle, config_.siteRadius_mm,
+    return std::clamp(kScatterFactor * medianOf(distances), config_.siteRadius_mm,
                       std::max(widest, config_.siteRadius_mm));
 }
 
@@ -126,20 +124,13 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     for (std::size_t f = 0; f < frames; ++f) {
         if (!body.posed[f])
             continue;
-        claimed.clear();
-        for (const Body& other : bodies_)
-            if (other.alive && other.posed[f] &&
-                std::find(body.apartFrom.begin(), body.apartFrom.end(), other.id) !=
-                    body.apartFrom.end())
-                for (const Vec3& m : other.markers_mm)
-                    claimed.push_back(other.T_rig_from_body[f].apply(m));
+        markersOfOthersAt(f, body, OtherBodies::KnownApart, claimed);
         const RigidTransform T_body_from_rig = body.T_rig_from_body[f].inverse();
         for (const Vec3& p : session.points(f)) {
             const Vec3 q = T_body_from_rig.apply(p);
             if ((q - extent.centre).squaredNorm() > reach2)
                 continue;
-            if (std::any_of(claimed.begin(), claimed.end(),
-                            [&](const Vec3& c) { return (c - p).squaredNorm() <= claim2; }))
+            if (nearAny(claimed, p, claim2))
                 continue;
             std::int32_t s = siteNear(q);
             if (s < 0) {

@@ -27,22 +27,10 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
     // triangles come close to each other (markers evenly spaced on a ring), the triangles of its
     // markers not yet learnt come as close, and three of those would pose it wrongly.
     std::vector<SortedTriangle> all;
-    for (std::size_t b = 0; b < bodies_.size(); ++b) {
-        const Body& other = bodies_[b];
-        if (!other.alive)
-            continue;
-        const std::vector<Vec3>& m = other.markers_mm;
-        for (std::uint32_t i = 0; i < m.size(); ++i)
-            for (std::uint32_t j = i + 1; j < m.size(); ++j)
-                for (std::uint32_t k = j + 1; k < m.size(); ++k) {
-                    SortedTriangle t = sortedTriangle(m[i], m[j], m[k], i, j, k);
-                    t.body = b;
-                    all.push_back(t);
-                }
-    }
-    std::sort(all.begin(), all.end(), [](const SortedTriangle& a, const SortedTriangle& b) {
-        return a.sides_mm[2] < b.sides_mm[2];
-    });
+    for (std::size_t b = 0; b < bodies_.size(); ++b)
+        if (bodies_[b].alive)
+            appendTriangles(bodies_[b].markers_mm, b, all);
+    std::sort(all.begin(), all.end(), shorterLongestSide);
     for (std::size_t i = 0; i < all.size(); ++i)
         for (std::size_t j = i + 1;
              j < all.size() && all[j].sides_mm[2] - all[i].sides_mm[2] <= apart; ++j)

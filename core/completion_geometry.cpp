@@ -183,23 +183,13 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
 std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
                                                  std::span<const Vec3> whole, double tolerance_mm,
                                                  double uniqueness_mm, std::size_t budget) {
-    auto trianglesOf = [](std::span<const Vec3> m) {
-        std::vector<SortedTriangle> all;
-        const auto n = static_cast<std::uint32_t>(m.size());
-        for (std::uint32_t i = 0; i < n; ++i)
-            for (std::uint32_t j = i + 1; j < n; ++j)
-                for (std::uint32_t k = j + 1; k < n; ++k)
-                    all.push_back(sortedTriangle(m[i], m[j], m[k], i, j, k));
-        return all;
-    };
     if (part.size() < 3 || whole.size() < 3)
         return std::nullopt;
-    const std::vector<SortedTriangle> ofPart = trianglesOf(part);
-    std::vector<SortedTriangle> ofWhole = trianglesOf(whole);
+    std::vector<SortedTriangle> ofPart, ofWhole;
+    appendTriangles(part, 0, ofPart);
+    appendTriangles(whole, 0, ofWhole);
     auto longest = [](const SortedTriangle& t) { return t.sides_mm[2]; };
-    std::sort(
-        ofWhole.begin(), ofWhole.end(),
-        [&](const SortedTriangle& a, const SortedTriangle& b) { return longest(a) < longest(b); });
+    std::sort(ofWhole.begin(), ofWhole.end(), shorterLongestSide);
     const SortedTriangle* soleOfPart = nullptr;
     const SortedTriangle* soleOfWhole = nullptr;
     std::size_t compared = 0;
@@ -230,6 +220,29 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
     if (!fit)
         return std::nullopt;
     return fit->transform;
+}
+
+void appendTriangles(std::span<const Vec3> layout, std::size_t body,
+                     std::vector<SortedTriangle>& out) {
+    const auto n = static_cast<std::uint32_t>(layout.size());
+    for (std::uint32_t i = 0; i < n; ++i)
+        for (std::uint32_t j = i + 1; j < n; ++j)
+            for (std::uint32_t k = j + 1; k < n; ++k) {
+                SortedTriangle t = sortedTriangle(layout[i], layout[j], layout[k], i, j, k);
+                t.body = body;
+                out.push_back(t);
+            }
+}
+
+double medianOf(std::vector<double>& values) {
+    const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+    std::nth_element(values.begin(), middle, values.end());
+    return *middle;
+}
+
+bool nearAny(std::span<const Vec3> points, const Vec3& p, double radius2_mm2) {
+    return std::any_of(points.begin(), points.end(),
+                       [&](const Vec3& q) { return (q - p).squaredNorm() <= radius2_mm2; });
 }
 
 SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,

@@ -92,6 +92,21 @@ struct SortedTriangle {
 SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
                               std::uint32_t ib, std::uint32_t ic);
 
+/// Every triangle of \a layout's markers, appended to \a out with SortedTriangle::body = \a body.
+void appendTriangles(std::span<const Vec3> layout, std::size_t body,
+                     std::vector<SortedTriangle>& out);
+
+/// Orders triangles by their longest side, so that congruent ones are found by a window search.
+inline bool shorterLongestSide(const SortedTriangle& a, const SortedTriangle& b) {
+    return a.sides_mm[2] < b.sides_mm[2];
+}
+
+/// The median of \a values (the upper one of an even count); reorders them. Not empty.
+double medianOf(std::vector<double>& values);
+
+/// Whether any of \a points lies within sqrt(\a radius2_mm2) of \a p.
+bool nearAny(std::span<const Vec3> points, const Vec3& p, double radius2_mm2);
+
 /// Whether every side of \a a is within \a tolerance_mm of the same side of \a b.
 bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm);
 
