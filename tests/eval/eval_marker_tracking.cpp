@@ -50,27 +50,49 @@ struct Totals {
     std::uint64_t splitParts = 0;
     std::uint64_t splitPartsAstray = 0;
     double splitSquaredError = 0.0;
+    /// Markers found from exact blobs, and of those lost at images level, by how close another
+    /// marker's disc came in either image: centre distance over the sum of the two radii, in
+    /// bins below 0.5, 0.75, 1 and from 1 (apart in both images).
+    std::array<std::uint64_t, 4> exactBySeparation{};
+    std::array<std::uint64_t, 4> lostBySeparation{};
+    /// Of the lost: no blob within 1.5 px of the marker in some camera.
+    std::array<std::uint64_t, 4> lostWithoutBlob{};
 };
+
+/// Bin of a separation (centre distance over the sum of radii) as in Totals::lostBySeparation.
+std::size_t separationBin(double separation) {
+    return separation < 0.5 ? 0 : separation < 0.75 ? 1 : separation < 1.0 ? 2 : 3;
+}
+
+/// For each marker of \a observation, whether a point of \a points lies within kFoundRadius_mm
+/// (each point claimed once, markers in order); false for markers not seen by both cameras.
+std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points);
 
 /// Points of \a points within kFoundRadius_mm of a distinct true marker seen by both cameras.
 std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points);
 
 constexpr double kFoundRadius_mm = 2.0;
 
-std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points) {
+std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points) {
     std::vector<bool> used(points.size(), false);
-    std::uint64_t found = 0;
-    for (const sim::MarkerView& truth : observation.markers) {
+    std::vector<bool> found(observation.markers.size(), false);
+    for (std::size_t i = 0; i < observation.markers.size(); ++i) {
+        const sim::MarkerView& truth = observation.markers[i];
         if (!truth.visible[0] || !truth.visible[1])
             continue;
         for (std::size_t k = 0; k < points.size(); ++k)
             if (!used[k] && (points[k] - truth.position_rig_mm).norm() < kFoundRadius_mm) {
                 used[k] = true;
-                ++found;
+                found[i] = true;
                 break;
             }
     }
     return found;
+}
+
+std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points) {
+    const std::vector<bool> found = foundMarkers(observation, points);
+    return static_cast<std::uint64_t>(std::count(found.begin(), found.end(), true));
 }
 
 } // namespace
@@ -166,6 +188,34 @@ int main(int argc, char** argv) {
         }
         exactBlobs.matchStereo();
         totals.foundFromExactBlobs += countFound(observation, exactBlobs.points_rig_mm());
+        {
+            const std::vector<bool> exact = foundMarkers(observation, exactBlobs.points_rig_mm());
+            const std::vector<bool> atImages = foundMarkers(observation, points);
+            for (std::size_t i = 0; i < observation.markers.size(); ++i) {
+                if (!exact[i])
+                    continue;
+                const sim::MarkerView& m = observation.markers[i];
+                double separation = 1e9;
+                bool withoutBlob = false;
+                for (std::size_t c = 0; c < 2; ++c) {
+                    for (const sim::MarkerView& other : observation.markers)
+                        if (&other != &m && other.visible[c])
+                            separation =
+                                std::min(separation, (other.pixel[c] - m.pixel[c]).norm() /
+                                                         (m.radius_px[c] + other.radius_px[c]));
+                    bool near = false;
+                    for (const Blob& b : pipeline.blobs(static_cast<int>(c)))
+                        near = near || (b.centre_px - m.pixel[c]).norm() < 1.5;
+                    withoutBlob = withoutBlob || !near;
+                }
+                const std::size_t bin = separationBin(separation);
+                ++totals.exactBySeparation[bin];
+                if (!atImages[i]) {
+                    ++totals.lostBySeparation[bin];
+                    totals.lostWithoutBlob[bin] += withoutBlob ? 1U : 0U;
+                }
+            }
+        }
         const std::size_t markerCount = observation.markers.size();
         std::vector<bool> used(points.size(), false);
         idOfTruth.clear();
@@ -279,6 +329,15 @@ int main(int argc, char** argv) {
                 std::sqrt(totals.splitSquaredError /
                           static_cast<double>(std::max<std::uint64_t>(1, totals.splitParts))),
                 static_cast<unsigned long long>(totals.splitPartsAstray));
+    std::printf("  found from exact blobs, lost at images level (no blob in some camera), by the "
+                "closest disc in either image (centre distance / sum of radii):\n   ");
+    const char* binNames[4] = {"< 0.5", "0.5-0.75", "0.75-1", ">= 1"};
+    for (std::size_t bin = 0; bin < 4; ++bin)
+        std::printf(" %s: %llu of %llu (%llu)", binNames[bin],
+                    static_cast<unsigned long long>(totals.lostBySeparation[bin]),
+                    static_cast<unsigned long long>(totals.exactBySeparation[bin]),
+                    static_cast<unsigned long long>(totals.lostWithoutBlob[bin]));
+    std::printf("\n");
     std::printf("  missed: %llu without a blob in some camera, %llu by stereo\n",
                 static_cast<unsigned long long>(totals.missedNoBlob),
                 static_cast<unsigned long long>(totals.missedByStereo));
