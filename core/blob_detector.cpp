@@ -147,7 +147,8 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     if (!valid_)
         return;
     moments_ = std::make_unique<Moments[]>(config.maxLabels);
-    // A split blob gives up to three candidates in place of one.
+    // A split blob gives up to kMaxSplitParts candidates in place of one; blobs of more than three
+    // discs are rare enough that three a label is room (beyond it, overflow is counted).
     candidates_ = BoundedVector<Candidate>(3 * config.maxLabels);
     notRound_ = BoundedVector<std::uint32_t>(config.maxLabels);
     maybeMerged_ = BoundedVector<std::uint32_t>(config.maxLabels);
@@ -402,15 +403,16 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         }
         const auto [elongation, fill] = shapeOf(m);
         // Candidates keep the order of their labels (top rows first); the parts of a split blob
-        // take the next three places.
-        const auto order = static_cast<std::uint32_t>(label) * 4U;
+        // take the places after it.
+        const auto order = static_cast<std::uint32_t>(label) * kOrderStride;
         if (elongation > config_.maxElongation || fill < config_.minFill) {
             ++counters_.rejectedNotRound;
             if (config_.splitMerged)
                 notRound_.push_back(static_cast<std::uint32_t>(label));
             continue;
         }
-        if (config_.splitMerged && elongation > kMaybeMergedElongation) {
+        if (config_.splitMerged &&
+            (elongation > kMaybeMergedElongation || fill < kMaybeMergedFill)) {
             maybeMerged_.push_back(static_cast<std::uint32_t>(label));
             continue;
         }
@@ -435,7 +437,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const Moments& m = moments_[label];
         if (!worthSplitting(m))
             continue;
-        if (splitIntoDiscs(m, pixels, stride_bytes, label * 4U))
+        if (splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride))
             ++counters_.splitBlobs;
         else
             ++counters_.splitRefused;
@@ -444,10 +446,10 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
     // Such a blob stays one blob unless two discs fit it.
     for (const std::uint32_t label : maybeMerged_) {
         const Moments& m = moments_[label];
-        if (worthSplitting(m) && splitIntoDiscs(m, pixels, stride_bytes, label * 4U, 2))
+        if (worthSplitting(m) && splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride, 2))
             ++counters_.splitBlobs;
         else
-            addCandidate(roundBlob(m), label * 4U);
+            addCandidate(roundBlob(m), label * kOrderStride);
     }
 
     const std::size_t room = out.capacity();
@@ -575,8 +577,8 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         Vec2 at;
         int depth;
     };
-    FixedVector<Peak, 4> discs;
-    for (int round = 0; round < 4; ++round) {
+    FixedVector<Peak, kMaxSplitParts + 1> discs;
+    for (std::size_t round = 0; round <= kMaxSplitParts; ++round) {
         Peak best{Vec2::Zero(), 0};
         for (int gy = 1; gy <= h; ++gy)
             for (int gx = 1; gx <= w; ++gx) {
@@ -597,7 +599,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
             break;
         discs.push_back(best);
     }
-    if (discs.empty() || discs.size() > 3)
+    if (discs.empty() || discs.size() > kMaxSplitParts)
         return false;
 
     // Outline points: where the level crosses the threshold between a pixel of the blob and its
@@ -628,7 +630,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     // circle explains yet (a smaller disc overlapping a larger one makes a shoulder, no peak).
     // A disc's own points lie near its circle and away from the other discs, whose light adds up
     // at the neck between them.
-    std::array<Circle, 3> circle{};
+    std::array<Circle, kMaxSplitParts> circle{};
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
     // Within a pixel of disc j's circle or inside it.
@@ -661,7 +663,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         if (!refit(count - 1))
             --count;
     }
-    while (count > 0 && count < 3) {
+    while (count > 0 && count < kMaxSplitParts) {
         std::size_t left = 0;
         for (std::size_t i = 0; i < edges; ++i) {
             bool explained = false;
@@ -683,12 +685,26 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     }
     if (count < 2)
         return false;
-    for (std::size_t k = 0; k < count; ++k)
-        if (!refit(k))
-            return false;
+    // A circle left without points of its own (another took them) was no disc: drop it, and fit
+    // the others again without it.
+    for (std::size_t k = 0; k < count;) {
+        if (refit(k)) {
+            ++k;
+            continue;
+        }
+        std::copy(circle.begin() + static_cast<std::ptrdiff_t>(k + 1),
+                  circle.begin() + static_cast<std::ptrdiff_t>(count),
+                  circle.begin() + static_cast<std::ptrdiff_t>(k));
+        --count;
+        k = 0;
+    }
+    // One circle is no explanation of a blob that is not round (a streak, an oval glint).
+    if (count < 2)
+        return false;
 
-    // A part is kept when its circle rests on points all round at least half of it and fits them.
-    std::array<bool, 3> trusted{};
+    // A part is kept when its circle rests on points all round at least half of it (a third when
+    // they fit it closely) and fits them.
+    std::array<bool, kMaxSplitParts> trusted{};
     std::size_t parts = 0;
     for (std::size_t k = 0; k < count; ++k) {
         Vec2 resultant = Vec2::Zero();
@@ -698,8 +714,15 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
                 resultant += (edge[i] - circle[k].centre).normalized();
                 ++n;
             }
-        trusted[k] = n >= 8 && resultant.norm() < 0.7 * static_cast<double>(n) &&
-                     circle[k].rms <= kSplitFitRms_px && circle[k].radius >= 1.0;
+        // The resultant's share of the points is 0.64 for a half circle, 0.83 for a third of one.
+        // A disc with neighbours on several sides keeps only a short arc of its own: that arc
+        // is trusted when it fits its circle closely.
+        const double resultantShare =
+            resultant.norm() / static_cast<double>(std::max<std::size_t>(n, 1));
+        const bool covered = resultantShare < 0.7 || (resultantShare < kShortArcShare &&
+                                                      circle[k].rms <= kShortArcFitRms_px);
+        trusted[k] =
+            n >= 8 && covered && circle[k].rms <= kSplitFitRms_px && circle[k].radius >= 1.0;
         parts += trusted[k] ? 1U : 0U;
     }
     if (parts == 0 || parts < minParts)

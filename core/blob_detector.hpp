@@ -24,7 +24,7 @@ struct BlobDetectorConfig {
     double maxElongation = 1.35;
     /// Smallest share of the moment ellipse that the blob fills; merged markers leave gaps.
     double minFill = 0.75;
-    /// A blob that fails those two tests is split into the two or three discs it is made of,
+    /// A blob that fails those two tests is split into the discs it is made of (up to five),
     /// each centred by a circle fitted to its own part of the outline (see BlobDetector).
     bool splitMerged = true;
     /// Blobs kept per image; more are counted as overflow.
@@ -49,7 +49,7 @@ struct Blob {
     float elongation = 1.0f;
     std::uint16_t left = 0, top = 0, right = 0, bottom = 0;
     std::uint8_t peak = 0;
-    /// Part of a blob of two or three touching discs: its centre is the fit of a circle to its own
+    /// Part of a blob of touching discs: its centre is the fit of a circle to its own
     /// part of the outline, and left..bottom are those of the whole blob.
     bool split = false;
     /// For a split part, the RMS distance of its outline points from the fitted circle (px).
@@ -111,8 +111,9 @@ private:
     void finishRow();
     void emitBlobs(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
                    std::span<const Vec2> expected_px);
-    /// Split a blob that is not round into the two or three discs it is made of, as candidates
-    /// (those that can be centred with confidence); false when fewer than \a minParts can.
+    /// Split a blob that is not round into the discs it is made of (up to kMaxSplitParts), as
+    /// candidates (those that can be centred with confidence); false when fewer than \a minParts
+    /// can.
     bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
                         std::uint32_t order, std::size_t minParts = 1);
     bool addCandidate(const Blob& blob, std::uint32_t order);
@@ -153,13 +154,28 @@ private:
     /// Round enough to pass as one disc, yet a little long: maybe two discs over each other.
     BoundedVector<std::uint32_t> maybeMerged_;
     /// Scratch of splitIntoDiscs, for a bounding box of at most kSplitSide x kSplitSide pixels.
-    static constexpr int kSplitSide = 64;
+    static constexpr int kSplitSide = 128;
+    /// Discs a blob is split into at most: a marker's image may touch several others, and a
+    /// chain of them is one blob. A large oval reflection shows six or more peaks along its
+    /// length, and circles fit pieces of its ends: such a blob stays refused.
+    static constexpr std::size_t kMaxSplitParts = 5;
+    /// Candidates' order: a label's blob, then its split parts.
+    static constexpr std::uint32_t kOrderStride = kMaxSplitParts + 1;
     /// A split part's circle must fit its outline points this well (px RMS).
     static constexpr double kSplitFitRms_px = 0.3;
+    /// A part whose own outline covers less than about half its circle is kept only when that
+    /// arc covers at least a third of it (the points' mean unit vector from the centre is
+    /// shorter than this) and fits it within kShortArcFitRms_px.
+    static constexpr double kShortArcShare = 0.85;
+    static constexpr double kShortArcFitRms_px = 0.15;
     /// A blob round enough to pass as one disc but longer than this may be two discs far over
     /// each other (a disc's own pixels measure 1.00 to 1.05): it is split when two discs fit
     /// its outline, and stays one blob otherwise.
     static constexpr double kMaybeMergedElongation = 1.08;
+    /// Likewise a blob that passes but fills less of its moment ellipse than a disc (1.0; a
+    /// disc of radius 2.5 px or more measures 0.95 or more): three or four discs in a cluster are
+    /// round as a whole. Blobs of the smallest discs (0.89) fit no two circles and stay one.
+    static constexpr double kMaybeMergedFill = 0.9;
     std::unique_ptr<std::uint8_t[]> splitMask_;
     std::unique_ptr<std::uint16_t[]> splitDistance_;
     std::unique_ptr<std::uint16_t[]> splitStack_;

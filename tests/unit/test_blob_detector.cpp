@@ -277,6 +277,91 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherThatPassAsRound) {
     EXPECT_EQ(detector.counters().splitParts, 6u);
 }
 
+TEST(BlobDetector, SplitsChainsOfMoreThanThreeDiscs) {
+    // Markers near each other in space make chains in the image: four large discs in a row (a
+    // blob 70 px long) and five small ones along a bend, each disc touching the next. Every disc
+    // is found within 0.15 px.
+    Image image(640, 480);
+    const std::vector<sim::Glint> discs = {
+        disc(100.3, 100.6, 9.0), disc(115.6, 101.4, 9.0), disc(131.2, 101.9, 9.0),
+        disc(146.5, 103.1, 9.0), // four in a row, 0.85 diameters apart
+        disc(300.2, 300.4, 5.0), disc(308.7, 301.1, 5.0), disc(316.3, 305.2, 5.0),
+        disc(321.4, 312.6, 5.0), disc(322.9, 321.2, 5.0)}; // five along a bend
+    drawSpots(image, discs);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(blobs.size(), discs.size());
+    for (const sim::Glint& d : discs) {
+        double nearest = 1e9;
+        for (const Blob& b : blobs)
+            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        EXPECT_LT(nearest, 0.15) << "disc at " << d.centre_px.transpose();
+    }
+    EXPECT_EQ(detector.counters().splitBlobs, 2u);
+    EXPECT_EQ(detector.counters().splitParts, 9u);
+}
+
+TEST(BlobDetector, SplitsAClusterThatPassesAsRound) {
+    // Four discs in a cluster make a blob round enough to pass the roundness tests, and as one
+    // blob its centre would lie between the markers. It is split: the three outer discs are found
+    // within 0.2 px. The one in the middle keeps three short arcs of its outline between its
+    // neighbours; it is left out rather than placed where no disc is.
+    Image image(640, 480);
+    const std::vector<sim::Glint> discs = {disc(209.9, 199.6, 6.0), disc(195.6, 208.7, 6.0),
+                                           disc(195.1, 191.8, 6.0)};
+    std::vector<sim::Glint> spots = discs;
+    spots.push_back(disc(200.4, 200.3, 6.0)); // in the middle
+    drawSpots(image, spots);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(detector.counters().rejectedNotRound, 0u) << "the cluster passes as round";
+    EXPECT_EQ(blobs.size(), discs.size());
+    for (const sim::Glint& d : discs) {
+        double nearest = 1e9;
+        for (const Blob& b : blobs)
+            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        EXPECT_LT(nearest, 0.2) << "disc at " << d.centre_px.transpose();
+    }
+    for (const Blob& b : blobs) {
+        double nearest = 1e9;
+        for (const sim::Glint& d : spots)
+            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        EXPECT_LT(nearest, 0.2) << "a blob where no disc is: " << b.centre_px.transpose();
+    }
+}
+
+TEST(BlobDetector, PlacesADiscThatKeepsAThirdOfItsOutline) {
+    // A disc resting on two others, one below to each side (0.75 to 0.83 diameters from each),
+    // keeps only its upper arc, about a third of its circle: that arc fits its circle closely
+    // and places it within 0.25 px (0.15 px RMS over all the discs).
+    Image image(640, 480);
+    std::vector<sim::Glint> discs;
+    const double spacings_px[] = {9.0, 9.5, 10.0};
+    for (int i = 0; i < 3; ++i) {
+        const double x = 160.3 + 150.0 * i, y = 200.4 + 0.1 * i;
+        const double s = spacings_px[i];
+        discs.push_back(disc(x, y, 6.0));
+        discs.push_back(disc(x - 0.8 * s, y + 0.6 * s, 6.0));
+        discs.push_back(disc(x + 0.8 * s, y + 0.6 * s, 6.0));
+    }
+    drawSpots(image, discs);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(blobs.size(), discs.size());
+    double sum2 = 0.0;
+    for (const sim::Glint& d : discs) {
+        double nearest = 1e9;
+        for (const Blob& b : blobs)
+            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        EXPECT_LT(nearest, 0.25) << "disc at " << d.centre_px.transpose();
+        sum2 += nearest * nearest;
+    }
+    EXPECT_LT(std::sqrt(sum2 / static_cast<double>(discs.size())), 0.15);
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
