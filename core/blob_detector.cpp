@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 
 #include "core/simd/neon.hpp"
 
@@ -683,6 +684,63 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
             break;
         }
     }
+    // A circle that fits its points poorly may be two discs far over each other, which make one
+    // peak of the distance and no shoulder: the outline no other circle explains is cut in two
+    // across its longest spread and each half fitted with a circle; then, eight times, each circle
+    // is fitted again to the points on it and away from the other circle.
+    const auto unexplainedByOthers = [&](std::size_t i, std::size_t k) {
+        for (std::size_t j = 0; j < count; ++j)
+            if (j != k && byDisc(i, j))
+                return false;
+        return true;
+    };
+    const auto splitInTwo = [&](std::size_t k) {
+        Vec2 mean = Vec2::Zero();
+        std::size_t n = 0;
+        for (std::size_t i = 0; i < edges; ++i)
+            if (unexplainedByOthers(i, k)) {
+                mean += edge[i];
+                ++n;
+            }
+        if (n < 16)
+            return false;
+        mean /= static_cast<double>(n);
+        Eigen::Matrix2d spread = Eigen::Matrix2d::Zero();
+        for (std::size_t i = 0; i < edges; ++i)
+            if (unexplainedByOthers(i, k))
+                spread += (edge[i] - mean) * (edge[i] - mean).transpose();
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> axes(spread);
+        const Vec2 across = axes.eigenvectors().col(1);
+        std::array<Circle, 2> halves{};
+        for (int pass = 0; pass < 8; ++pass) {
+            for (std::size_t side = 0; side < 2; ++side) {
+                const Circle& other = halves[1 - side];
+                for (std::size_t i = 0; i < edges; ++i) {
+                    bool mine = unexplainedByOthers(i, k);
+                    if (mine && pass == 0)
+                        mine = ((edge[i] - mean).dot(across) < 0.0) == (side == 0);
+                    else if (mine)
+                        mine = std::abs((edge[i] - halves[side].centre).norm() -
+                                        halves[side].radius) <= 1.0 &&
+                               (edge[i] - other.centre).norm() > other.radius + 1.0;
+                    use[i] = mine ? 1 : 0;
+                }
+                const Circle fitted = fitCircle(edge, use, edges);
+                if (!fitted.valid || fitted.radius < 1.0 || fitted.radius > kSplitSide)
+                    return false;
+                halves[side] = fitted;
+            }
+        }
+        if (halves[0].rms > kSplitFitRms_px || halves[1].rms > kSplitFitRms_px ||
+            (halves[0].centre - halves[1].centre).norm() < 1.0)
+            return false;
+        circle[k] = halves[0];
+        circle[count++] = halves[1];
+        return true;
+    };
+    for (std::size_t k = 0; k < count && count < kMaxSplitParts; ++k)
+        if (circle[k].rms > kSplitFitRms_px)
+            splitInTwo(k);
     if (count < 2)
         return false;
     // A circle left without points of its own (another took them) was no disc: drop it, and fit

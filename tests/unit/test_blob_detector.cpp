@@ -362,6 +362,35 @@ TEST(BlobDetector, PlacesADiscThatKeepsAThirdOfItsOutline) {
     EXPECT_LT(std::sqrt(sum2 / static_cast<double>(discs.size())), 0.15);
 }
 
+TEST(BlobDetector, SplitsTwoDiscsFarOverEachOtherWithinALargerBlob) {
+    // Two discs 0.3 and 0.35 diameters apart make one peak of the distance and one circle that
+    // fits their outline poorly; with a third disc touching them the blob is not round, and the
+    // poor circle is split in two across its longest spread. Every disc within 0.25 px.
+    Image image(640, 480);
+    std::vector<sim::Glint> discs;
+    const double apart[] = {0.3, 0.35};
+    for (int i = 0; i < 2; ++i) {
+        const double x = 160.3 + 150.0 * i, y = 200.4 + 0.1 * i;
+        discs.push_back(disc(x, y, 6.0));
+        discs.push_back(disc(x + 12.0 * apart[i], y + 0.3, 6.0));
+        discs.push_back(disc(x + 6.0 * apart[i] + 1.0, y + 10.5, 6.0)); // below, touching both
+    }
+    drawSpots(image, discs);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_EQ(blobs.size(), discs.size());
+    double sum2 = 0.0;
+    for (const sim::Glint& d : discs) {
+        double nearest = 1e9;
+        for (const Blob& b : blobs)
+            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        EXPECT_LT(nearest, 0.25) << "disc at " << d.centre_px.transpose();
+        sum2 += nearest * nearest;
+    }
+    EXPECT_LT(std::sqrt(sum2 / static_cast<double>(discs.size())), 0.15);
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
