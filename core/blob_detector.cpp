@@ -438,18 +438,14 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const Moments& m = moments_[label];
         if (!worthSplitting(m))
             continue;
-        if (splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride))
-            ++counters_.splitBlobs;
-        else
+        if (!splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride))
             ++counters_.splitRefused;
     }
     // Two discs far over each other pass the roundness tests; their outline is still two arcs.
     // Such a blob stays one blob unless two discs fit it.
     for (const std::uint32_t label : maybeMerged_) {
         const Moments& m = moments_[label];
-        if (worthSplitting(m) && splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride, 2))
-            ++counters_.splitBlobs;
-        else
+        if (!worthSplitting(m) || !splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride, 2))
             addCandidate(roundBlob(m), label * kOrderStride);
     }
 
@@ -461,10 +457,12 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         for (Candidate& c : candidates_) {
             const double nearest2 = nearestExpected2(c.blob.centre_px, expected_px, near2);
             c.group = nearest2 < near2 ? 0 : 1;
-            // Split parts rank after the round blobs: their circles are round by construction.
-            c.key = c.group == 0   ? nearest2
-                    : c.blob.split ? config_.maxElongation + static_cast<double>(c.blob.fitRms_px)
-                                   : static_cast<double>(c.blob.elongation);
+            // Split parts and cut discs rank after the round blobs: their circles are round by
+            // construction.
+            c.key = c.group == 0 ? nearest2
+                    : c.blob.split || c.blob.cut
+                        ? config_.maxElongation + static_cast<double>(c.blob.fitRms_px)
+                        : static_cast<double>(c.blob.elongation);
         }
         const auto before = [](const Candidate& a, const Candidate& b) {
             if (a.group != b.group)
@@ -634,6 +632,87 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::array<Circle, kMaxSplitParts> circle{};
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
+
+    // One peak: perhaps one disc with a piece cut off by an edge in front of it (a hand, the
+    // object's body). Its outline is an arc of the disc's circle and a cut that runs inside the
+    // circle, never outside it; its own pixels would pull its centre towards what is left of it.
+    // Fitted to every outline point, the circle is drawn inside; the points well inside it are
+    // left out and it is fitted again, until only the arc is left. The disc is centred by that
+    // circle when it fits the arc closely, the arc covers a third of it or more, and no point lies
+    // outside it (which would be another disc or a reflection beside it).
+    if (discs.size() == 1) {
+        std::fill_n(use, edges, std::uint8_t{1});
+        Circle arc{};
+        for (int pass = 0; pass < 8; ++pass) {
+            const Circle fitted = fitCircle(edge, use, edges);
+            if (!fitted.valid)
+                break;
+            arc = fitted;
+            bool changed = false;
+            for (std::size_t i = 0; i < edges; ++i) {
+                const std::uint8_t onArc =
+                    (edge[i] - arc.centre).norm() - arc.radius > -kCutInside_px ? 1 : 0;
+                changed = changed || onArc != use[i];
+                use[i] = onArc;
+            }
+            if (!changed)
+                break;
+        }
+        Vec2 resultant = Vec2::Zero();
+        std::size_t onArc = 0, inside = 0;
+        bool outside = false;
+        for (std::size_t i = 0; i < edges && arc.valid; ++i) {
+            const double residual = (edge[i] - arc.centre).norm() - arc.radius;
+            outside = outside || residual > 1.0;
+            inside += residual <= -kCutInside_px ? 1U : 0U;
+            if (residual > -kCutInside_px) {
+                resultant += (edge[i] - arc.centre).normalized();
+                ++onArc;
+            }
+        }
+        // The cut is one run of points; two discs far over each other, which a circle round
+        // both also fits, leave two: their necks, on either side.
+        bool oneCut = inside > 0;
+        if (arc.valid && oneCut) {
+            constexpr std::uint8_t kOnCut = 2, kReached = 3;
+            std::size_t first = edges, reached = 1;
+            for (std::size_t i = 0; i < edges; ++i)
+                if ((edge[i] - arc.centre).norm() - arc.radius <= -kCutInside_px) {
+                    use[i] = kOnCut;
+                    first = std::min(first, i);
+                }
+            use[first] = kReached;
+            for (bool grew = true; grew;) {
+                grew = false;
+                for (std::size_t i = 0; i < edges; ++i) {
+                    if (use[i] != kOnCut)
+                        continue;
+                    for (std::size_t j = 0; j < edges; ++j)
+                        if (use[j] == kReached && (edge[i] - edge[j]).squaredNorm() <= 4.0) {
+                            use[i] = kReached;
+                            ++reached;
+                            grew = true;
+                            break;
+                        }
+                }
+            }
+            oneCut = reached == inside;
+        }
+        if (arc.valid && !outside && oneCut && onArc >= 8 && arc.radius >= 1.0 &&
+            (arc.rms <= kShortArcFitRms_px ||
+             (arc.rms <= kSplitFitRms_px && resultant.norm() < 0.7 * static_cast<double>(onArc))) &&
+            resultant.norm() < kShortArcShare * static_cast<double>(onArc)) {
+            Blob part = framedBlob(m);
+            part.centre_px = {arc.centre.x() + m.left - 1, arc.centre.y() + m.top - 1};
+            part.area_px = static_cast<float>(3.14159265358979323846 * arc.radius * arc.radius);
+            part.elongation = 1.0F;
+            part.cut = true;
+            part.fitRms_px = static_cast<float>(arc.rms);
+            addCandidate(part, order + 1);
+            ++counters_.cutDiscs;
+            return true;
+        }
+    }
     // Within a pixel of disc j's circle or inside it.
     const auto byDisc = [&](std::size_t i, std::size_t j) {
         return (edge[i] - circle[j].centre).norm() <= circle[j].radius + 1.0;
@@ -797,8 +876,9 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         part.fitRms_px = static_cast<float>(circle[k].rms);
         addCandidate(part, order + 1 + static_cast<std::uint32_t>(k));
     }
+    ++counters_.splitBlobs;
     counters_.splitParts += parts;
-    return parts > 0;
+    return true;
 }
 
 } // namespace edgetrack

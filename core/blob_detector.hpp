@@ -52,7 +52,11 @@ struct Blob {
     /// Part of a blob of touching discs: its centre is the fit of a circle to its own
     /// part of the outline, and left..bottom are those of the whole blob.
     bool split = false;
-    /// For a split part, the RMS distance of its outline points from the fitted circle (px).
+    /// A disc cut by an edge in front of it (a hand, the object's body): its centre is that of
+    /// the circle through its visible arc, and left..bottom are those of the visible part.
+    bool cut = false;
+    /// For a split part or a cut disc, the RMS distance of its outline points from the fitted
+    /// circle (px).
     float fitRms_px = 0.0f;
 };
 
@@ -66,6 +70,7 @@ struct BlobCounters {
     std::uint64_t splitBlobs = 0;   ///< blobs of touching discs split into their discs
     std::uint64_t splitParts = 0;   ///< discs those gave
     std::uint64_t splitRefused = 0; ///< blobs not round that could not be split with confidence
+    std::uint64_t cutDiscs = 0;     ///< discs cut by an edge, centred by their visible arc
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
 };
@@ -112,8 +117,8 @@ private:
     void emitBlobs(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
                    std::span<const Vec2> expected_px);
     /// Split a blob that is not round into the discs it is made of (up to kMaxSplitParts), as
-    /// candidates (those that can be centred with confidence); false when fewer than \a minParts
-    /// can.
+    /// candidates (those that can be centred with confidence), or centre it as one disc cut by an
+    /// edge; false when neither, or when fewer than \a minParts discs can be centred.
     bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
                         std::uint32_t order, std::size_t minParts = 1);
     bool addCandidate(const Blob& blob, std::uint32_t order);
@@ -168,6 +173,8 @@ private:
     /// shorter than this) and fits it within kShortArcFitRms_px.
     static constexpr double kShortArcShare = 0.85;
     static constexpr double kShortArcFitRms_px = 0.15;
+    /// An outline point this far inside a cut disc's circle (px) lies on the cut, not the arc.
+    static constexpr double kCutInside_px = 0.4;
     /// A blob round enough to pass as one disc but longer than this may be two discs far over
     /// each other (a disc's own pixels measure 1.00 to 1.05): it is split when two discs fit
     /// its outline, and stays one blob otherwise.

@@ -68,6 +68,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
         c.rejectedNotRound += detectors_[camera].counters().rejectedNotRound;
         c.splitBlobs += detectors_[camera].counters().splitBlobs;
         c.splitRefused += detectors_[camera].counters().splitRefused;
+        c.cutDiscs += detectors_[camera].counters().cutDiscs;
         c.labelOverflow += detectors_[camera].counters().labelOverflow;
         // The detector chooses which blobs fit and counts the rest; the blob vectors count blobs
         // given from outside (blobs level) that did not fit.

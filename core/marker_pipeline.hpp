@@ -28,6 +28,8 @@ struct MarkerPipelineCounters {
     /// Blobs not round that were split into their discs, and those that could not be.
     std::uint64_t splitBlobs = 0;
     std::uint64_t splitRefused = 0;
+    /// Discs cut by an edge in front of them, centred by their visible arc.
+    std::uint64_t cutDiscs = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;

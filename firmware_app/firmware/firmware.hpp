@@ -78,6 +78,8 @@ struct FirmwareCounters {
     /// Blobs of touching markers split into their discs, and those that could not be.
     std::uint64_t blobsSplit = 0;
     std::uint64_t blobsNotSplit = 0;
+    /// Discs cut by an edge in front of them, centred by their visible arc.
+    std::uint64_t blobsCut = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;

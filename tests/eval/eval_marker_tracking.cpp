@@ -356,9 +356,11 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(sc.rejectedRayGap),
                 static_cast<unsigned long long>(sc.rejectedReprojection));
     const BlobCounters& bc = pipeline.detector(0).counters();
-    std::printf("  blobs (camera 0): accepted %llu, not round %llu, small %llu, large %llu\n",
+    std::printf("  blobs (camera 0): accepted %llu, not round %llu (cut discs %llu), small %llu, "
+                "large %llu\n",
                 static_cast<unsigned long long>(bc.accepted),
                 static_cast<unsigned long long>(bc.rejectedNotRound),
+                static_cast<unsigned long long>(bc.cutDiscs),
                 static_cast<unsigned long long>(bc.rejectedSmall),
                 static_cast<unsigned long long>(bc.rejectedLarge));
 

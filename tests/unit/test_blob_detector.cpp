@@ -391,6 +391,44 @@ TEST(BlobDetector, SplitsTwoDiscsFarOverEachOtherWithinALargerBlob) {
     EXPECT_LT(std::sqrt(sum2 / static_cast<double>(discs.size())), 0.15);
 }
 
+TEST(BlobDetector, CentresADiscCutByAnEdgeFromItsVisibleArc) {
+    // Markers partly hidden behind an edge in front of them: the straight edge of the object's
+    // body (a fifth, a third and half of the disc hidden) and the round edge of a hand (a disc of
+    // 40 px). The pixels of what is left pull the centre towards it by up to 2.5 px; the circle
+    // through the visible arc puts it within 0.15 px of the true centre.
+    Image image(640, 480);
+    const std::vector<sim::Glint> discs = {disc(100.3, 100.6, 6.0), disc(250.7, 100.2, 6.0),
+                                           disc(400.45, 100.9, 6.0), disc(300.2, 300.4, 6.0)};
+    drawSpots(image, discs);
+    // Hidden: x beyond the centre + 0.6, 0.33 and 0 radii; inside a hand of radius 40 px whose
+    // edge passes 2.5 px from the last disc's centre.
+    const double straightCuts_px[] = {0.6 * 6.0, 0.33 * 6.0, 0.0};
+    for (std::size_t i = 0; i < 3; ++i)
+        for (int y = 80; y < 120; ++y)
+            for (int x = static_cast<int>(std::ceil(discs[i].centre_px.x() + straightCuts_px[i]));
+                 x < static_cast<int>(discs[i].centre_px.x()) + 20; ++x)
+                image.at(x, y) = 10;
+    const Vec2 hand(300.2 + 42.5, 300.4);
+    for (int y = 250; y < 350; ++y)
+        for (int x = 280; x < 400; ++x)
+            if ((Vec2(x, y) - hand).norm() < 40.0)
+                image.at(x, y) = 10;
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    ASSERT_EQ(blobs.size(), discs.size());
+    for (const sim::Glint& d : discs) {
+        const Blob* nearest = &blobs[0];
+        for (const Blob& b : blobs)
+            if ((b.centre_px - d.centre_px).norm() < (nearest->centre_px - d.centre_px).norm())
+                nearest = &b;
+        EXPECT_LT((nearest->centre_px - d.centre_px).norm(), 0.15)
+            << "disc at " << d.centre_px.transpose();
+        EXPECT_TRUE(nearest->cut) << "disc at " << d.centre_px.transpose();
+    }
+    EXPECT_EQ(detector.counters().cutDiscs, discs.size());
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
