@@ -158,6 +158,7 @@ void World::fillView(MarkerView& view, const Vec3& normal_rig, double diameter_m
         view.visible[c] = true;
         view.pixel[c] = *pixel;
         view.radius_px[c] = in.fx_px * 0.5 * diameter_mm / inCamera.z();
+        view.depth_mm[c] = inCamera.z();
         view.peak_dn[c] = kPeakAtReference_dn * falloff * falloff * facing;
     }
 }
@@ -172,8 +173,10 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
     out.objectPoses.reserve(scene_.objects.size());
     out.markers.reserve(markerCount);
     out.spuriousPoints.reserve(spuriousPoints_rig_mm_.size());
-    for (std::size_t camera = 0; camera < 2; ++camera)
+    for (std::size_t camera = 0; camera < 2; ++camera) {
         out.glints[camera].reserve(staticGlints_[camera].size() + flickerGlints_[camera].size());
+        out.occluders[camera].reserve(scene_.occluders.size());
+    }
     out.objectPoses.clear();
     for (const SceneObject& object : scene_.objects)
         out.objectPoses.push_back(object.motion.poseAt(t));
@@ -213,6 +216,20 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
         out.spuriousPoints.push_back(view);
     }
     for (std::size_t camera = 0; camera < 2; ++camera) {
+        out.occluders[camera].clear();
+        const CameraModel& model = rig_.camera(static_cast<int>(camera));
+        for (std::size_t i = 0; i < occluderScratch_.size(); ++i) {
+            const Vec3 inCamera = model.toCamera(occluderScratch_[i]);
+            const double radius_mm = scene_.occluders[i].radius_mm;
+            const std::optional<Vec2> centre = model.project(occluderScratch_[i]);
+            if (!centre || inCamera.z() <= radius_mm)
+                continue;
+            out.occluders[camera].push_back({*centre,
+                                             model.intrinsics().fx_px * radius_mm / inCamera.z(),
+                                             inCamera.z() - radius_mm});
+        }
+    }
+    for (std::size_t camera = 0; camera < 2; ++camera) {
         out.glints[camera].clear();
         for (const Glint& g : staticGlints_[camera])
             out.glints[camera].push_back(g);
@@ -239,7 +256,8 @@ FrameRenderer::FrameRenderer(int width_px, int height_px, double background_dn,
 
 void FrameRenderer::drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
                              double radiusMajor_px, double radiusMinor_px, double angle_rad,
-                             double peak_dn) const {
+                             double peak_dn, double depth_mm,
+                             std::span<const OccluderView> occluders) const {
     if (peak_dn <= 0.5)
         return;
     const double reach = radiusMajor_px + 4.0 * kEdgeBlur_px + 1.0;
@@ -257,7 +275,13 @@ void FrameRenderer::drawSpot(std::span<std::uint8_t> image, int stride_bytes, co
             const double along = (dx * c + dy * s) * squeeze;
             const double across = -dx * s + dy * c;
             const double rho = std::sqrt(along * along + across * across);
-            const double value = peak_dn * 0.5 * std::erfc((rho - radiusMinor_px) * edgeScale);
+            double value = peak_dn * 0.5 * std::erfc((rho - radiusMinor_px) * edgeScale);
+            // Behind the edge of a nearer occluder, as blurred as any edge.
+            for (const OccluderView& o : occluders)
+                if (o.depth_mm < depth_mm)
+                    value *=
+                        1.0 - 0.5 * std::erfc(((Vec2(x, y) - o.centre_px).norm() - o.radius_px) *
+                                              edgeScale);
             const double sum = row[x] + value + 0.5;
             row[x] = static_cast<std::uint8_t>(sum >= 255.0 ? 255.0 : sum);
         }
@@ -279,7 +303,7 @@ void FrameRenderer::render(std::span<std::uint8_t> image, int stride_bytes, int 
     for (const MarkerView& m : observation.markers)
         if (m.visible[c])
             drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,
-                     m.peak_dn[c] * lit);
+                     m.peak_dn[c] * lit, m.depth_mm[c], observation.occluders[c]);
     for (const MarkerView& m : observation.spuriousPoints)
         if (m.visible[c])
             drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,

@@ -22,6 +22,17 @@ struct MarkerView {
     std::array<double, 2> radius_px{};
     /// Peak brightness with the LED ring lit for the whole exposure (DN; above 255 saturates).
     std::array<double, 2> peak_dn{};
+    /// Depth in each camera's frame (mm, along its optical axis): what lies nearer hides it.
+    std::array<double, 2> depth_mm{};
+};
+
+/// \brief A hand or arm (an occluder sphere) as one camera sees it: a dark disc in front of what
+/// lies deeper, which cuts the discs of markers at its edge.
+struct OccluderView {
+    Vec2 centre_px = Vec2::Zero();
+    double radius_px = 0.0;
+    /// Depth of its nearest point in the camera's frame (mm).
+    double depth_mm = 0.0;
 };
 
 /// \brief An image-space reflection of ambient IR in one camera; not lit by the LED ring.
@@ -44,6 +55,9 @@ struct Observation {
     /// Reflective points in the volume that are lit this frame (ambient, both cameras).
     std::vector<MarkerView> spuriousPoints;
     std::array<std::vector<Glint>, 2> glints;
+    /// Per camera, the occluders in front of it: a marker whose centre they leave in view but
+    /// whose disc reaches under one is rendered cut by its edge.
+    std::array<std::vector<OccluderView>, 2> occluders;
 };
 
 /**
@@ -114,9 +128,10 @@ public:
     static constexpr double kEdgeBlur_px = 0.6;
 
 private:
+    /// A spot at depth \a depth_mm, cut by the edges of the \a occluders nearer than that.
     void drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
-                  double radiusMajor_px, double radiusMinor_px, double angle_rad,
-                  double peak_dn) const;
+                  double radiusMajor_px, double radiusMinor_px, double angle_rad, double peak_dn,
+                  double depth_mm = 0.0, std::span<const OccluderView> occluders = {}) const;
 
     int width_px_;
     int height_px_;

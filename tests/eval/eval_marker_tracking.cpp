@@ -50,6 +50,12 @@ struct Totals {
     std::uint64_t splitParts = 0;
     std::uint64_t splitPartsAstray = 0;
     double splitSquaredError = 0.0;
+    /// Markers whose disc reaches under a nearer hand's edge in an image (camera-images): with a
+    /// blob within 1.5 px of their true centre (its error), of those blobs centred as cut discs.
+    std::uint64_t cutImages = 0;
+    std::uint64_t cutWithBlob = 0;
+    std::uint64_t cutCentredByArc = 0;
+    double cutSquaredError = 0.0;
     /// Markers found from exact blobs, and of those lost at images level, by how close another
     /// marker's disc came in either image: centre distance over the sum of the two radii, in
     /// bins below 0.5, 0.75, 1 and from 1 (apart in both images).
@@ -170,6 +176,28 @@ int main(int argc, char** argv) {
                         ++totals.touchingImages;
                         break;
                     }
+            }
+            for (const sim::MarkerView& m : observation.markers) {
+                if (!m.visible[camera])
+                    continue;
+                bool cut = false;
+                for (const sim::OccluderView& o : observation.occluders[camera])
+                    cut = cut || (o.depth_mm < m.depth_mm[camera] &&
+                                  (m.pixel[camera] - o.centre_px).norm() <
+                                      o.radius_px + m.radius_px[camera]);
+                if (!cut)
+                    continue;
+                ++totals.cutImages;
+                const Blob* nearest = nullptr;
+                for (const Blob& b : pipeline.blobs(c))
+                    if (nearest == nullptr || (b.centre_px - m.pixel[camera]).norm() <
+                                                  (nearest->centre_px - m.pixel[camera]).norm())
+                        nearest = &b;
+                if (nearest != nullptr && (nearest->centre_px - m.pixel[camera]).norm() < 1.5) {
+                    ++totals.cutWithBlob;
+                    totals.cutCentredByArc += nearest->cut ? 1U : 0U;
+                    totals.cutSquaredError += (nearest->centre_px - m.pixel[camera]).squaredNorm();
+                }
             }
             for (const Blob& b : pipeline.blobs(c)) {
                 if (!b.split)
@@ -329,6 +357,14 @@ int main(int argc, char** argv) {
                 std::sqrt(totals.splitSquaredError /
                           static_cast<double>(std::max<std::uint64_t>(1, totals.splitParts))),
                 static_cast<unsigned long long>(totals.splitPartsAstray));
+    std::printf(
+        "  markers cut by a hand's edge in their image: %llu; a blob within 1.5 px for %llu, "
+        "centre RMS %.3f px (%llu centred by their arc)\n",
+        static_cast<unsigned long long>(totals.cutImages),
+        static_cast<unsigned long long>(totals.cutWithBlob),
+        std::sqrt(totals.cutSquaredError /
+                  static_cast<double>(std::max<std::uint64_t>(1, totals.cutWithBlob))),
+        static_cast<unsigned long long>(totals.cutCentredByArc));
     std::printf("  found from exact blobs, lost at images level (no blob in some camera), by the "
                 "closest disc in either image (centre distance / sum of radii):\n   ");
     const char* binNames[4] = {"< 0.5", "0.5-0.75", "0.75-1", ">= 1"};

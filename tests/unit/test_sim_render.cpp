@@ -204,3 +204,30 @@ TEST(SimLevels, StreaksAreNotReportedAsBlobs) {
     ASSERT_EQ(blobs.size(), 1u);
     EXPECT_NEAR(blobs[0].centre_px.x(), 50.0, 0.5);
 }
+
+TEST(SimRender, AMarkerAtTheEdgeOfANearerHandIsCutByIt) {
+    // One marker whose centre a hand leaves in view, its disc reaching 4 px under the hand's
+    // edge: what lies under the hand is dark, the rest of the disc lit. The same hand behind the
+    // marker hides nothing of it.
+    FrameRenderer renderer(320, 240, 10.0, 0.0, 1);
+    std::vector<std::uint8_t> image(320 * 240);
+    Observation observation;
+    MarkerView marker;
+    marker.visible = {true, true};
+    marker.pixel[0] = {100.0, 100.0};
+    marker.radius_px[0] = 8.0;
+    marker.peak_dn[0] = 1000.0;
+    marker.depth_mm[0] = 500.0;
+    observation.markers.push_back(marker);
+    const auto at = [&](int x, int y) { return image[static_cast<std::size_t>(y * 320 + x)]; };
+    // The hand's edge passes 4 px right of the marker's centre.
+    observation.occluders[0].push_back({Vec2(100.0 + 4.0 + 30.0, 100.0), 30.0, 300.0});
+    renderer.render(image, 320, 0, observation, 1.0, 0);
+    EXPECT_EQ(at(100, 100), 255);
+    EXPECT_EQ(at(96, 100), 255);
+    EXPECT_LT(at(106, 100), 30) << "under the hand";
+    EXPECT_LT(at(107, 97), 30) << "under the hand";
+    observation.occluders[0].back().depth_mm = 600.0;
+    renderer.render(image, 320, 0, observation, 1.0, 0);
+    EXPECT_EQ(at(106, 100), 255) << "the hand is behind the marker";
+}
