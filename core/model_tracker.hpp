@@ -48,9 +48,7 @@ struct ModelTrackingConfig {
     double predictionHorizon_s = 0.05;
     /// A body followed from its prediction stays found with this many markers, even below its
     /// S_min: its identity comes from continuity, S_min only has to hold when it is first found.
-    /// Three determine a pose (minPoseSpread_mm keeps them off one line): a body in view with four
-    /// then survives one marker lost to a reflection.
-    std::uint32_t minTrackedMarkers = 3;
+    std::uint32_t minTrackedMarkers = 4;
     /// The matched markers of a pose must lie at least this far (mm, largest distance in the
     /// model frame) off the line that fits them best: markers on one line leave the turn about it
     /// undetermined, and such a pose puts every other marker of the body at random.
