@@ -633,13 +633,35 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
 
+    // A circle rests on its own outline points when they cover at least half of it (their unit
+    // vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83
+    // for a third) and fit it within kSplitFitRms_px, or cover a third of it and fit it within
+    // kShortArcFitRms_px: a disc with neighbours on several sides, or cut by an edge, keeps only
+    // a short arc of its own.
+    const auto restsOnItsArc = [](const Circle& c, std::size_t n, const Vec2& resultant) {
+        const double share = resultant.norm() / static_cast<double>(std::max<std::size_t>(n, 1));
+        const bool covered = share < 0.7 || (share < kShortArcShare && c.rms <= kShortArcFitRms_px);
+        return n >= 8 && covered && c.rms <= kSplitFitRms_px && c.radius >= 1.0;
+    };
+    // A disc of this blob centred by circle \a c (grid coordinates).
+    const auto discBlob = [&](const Circle& c) {
+        Blob part = framedBlob(m);
+        part.centre_px = {c.centre.x() + m.left - 1, c.centre.y() + m.top - 1};
+        part.area_px = static_cast<float>(3.14159265358979323846 * c.radius * c.radius);
+        part.elongation = 1.0F;
+        part.fitRms_px = static_cast<float>(c.rms);
+        return part;
+    };
+
     // One peak: perhaps one disc with a piece cut off by an edge in front of it (a hand, the
     // object's body). Its outline is an arc of the disc's circle and a cut that runs inside the
     // circle, never outside it; its own pixels would pull its centre towards what is left of it.
     // Fitted to every outline point, the circle is drawn inside; the points well inside it are
     // left out and it is fitted again, until only the arc is left. The disc is centred by that
-    // circle when it fits the arc closely, the arc covers a third of it or more, and no point lies
-    // outside it (which would be another disc or a reflection beside it).
+    // circle when it rests on the arc, no point lies outside it (which would be another disc or a
+    // reflection beside it) and the points inside it are one run, the cut: a circle round two
+    // discs far over each other also leaves every point on or inside it, but their necks are two
+    // runs, one on either side.
     if (discs.size() == 1) {
         std::fill_n(use, edges, std::uint8_t{1});
         Circle arc{};
@@ -658,29 +680,27 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
             if (!changed)
                 break;
         }
+        // The points on the arc, and those on the cut (flagged for the run below).
+        constexpr std::uint8_t kOnCut = 2, kReached = 3;
         Vec2 resultant = Vec2::Zero();
-        std::size_t onArc = 0, inside = 0;
+        std::size_t onArc = 0, inside = 0, first = edges;
         bool outside = false;
         for (std::size_t i = 0; i < edges && arc.valid; ++i) {
             const double residual = (edge[i] - arc.centre).norm() - arc.radius;
             outside = outside || residual > 1.0;
-            inside += residual <= -kCutInside_px ? 1U : 0U;
             if (residual > -kCutInside_px) {
                 resultant += (edge[i] - arc.centre).normalized();
                 ++onArc;
+                use[i] = 0;
+            } else {
+                use[i] = kOnCut;
+                first = std::min(first, i);
+                ++inside;
             }
         }
-        // The cut is one run of points; two discs far over each other, which a circle round
-        // both also fits, leave two: their necks, on either side.
-        bool oneCut = inside > 0;
-        if (arc.valid && oneCut) {
-            constexpr std::uint8_t kOnCut = 2, kReached = 3;
-            std::size_t first = edges, reached = 1;
-            for (std::size_t i = 0; i < edges; ++i)
-                if ((edge[i] - arc.centre).norm() - arc.radius <= -kCutInside_px) {
-                    use[i] = kOnCut;
-                    first = std::min(first, i);
-                }
+        if (arc.valid && inside > 0 && !outside && restsOnItsArc(arc, onArc, resultant)) {
+            // Grow the run from its first point by steps of at most 2 px.
+            std::size_t reached = 1;
             use[first] = kReached;
             for (bool grew = true; grew;) {
                 grew = false;
@@ -696,21 +716,13 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
                         }
                 }
             }
-            oneCut = reached == inside;
-        }
-        if (arc.valid && !outside && oneCut && onArc >= 8 && arc.radius >= 1.0 &&
-            (arc.rms <= kShortArcFitRms_px ||
-             (arc.rms <= kSplitFitRms_px && resultant.norm() < 0.7 * static_cast<double>(onArc))) &&
-            resultant.norm() < kShortArcShare * static_cast<double>(onArc)) {
-            Blob part = framedBlob(m);
-            part.centre_px = {arc.centre.x() + m.left - 1, arc.centre.y() + m.top - 1};
-            part.area_px = static_cast<float>(3.14159265358979323846 * arc.radius * arc.radius);
-            part.elongation = 1.0F;
-            part.cut = true;
-            part.fitRms_px = static_cast<float>(arc.rms);
-            addCandidate(part, order + 1);
-            ++counters_.cutDiscs;
-            return true;
+            if (reached == inside) {
+                Blob part = discBlob(arc);
+                part.cut = true;
+                addCandidate(part, order + 1);
+                ++counters_.cutDiscs;
+                return true;
+            }
         }
     }
     // Within a pixel of disc j's circle or inside it.
@@ -839,8 +851,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     if (count < 2)
         return false;
 
-    // A part is kept when its circle rests on points all round at least half of it (a third when
-    // they fit it closely) and fits them.
+    // A part is kept when its circle rests on its own outline points.
     std::array<bool, kMaxSplitParts> trusted{};
     std::size_t parts = 0;
     for (std::size_t k = 0; k < count; ++k) {
@@ -851,15 +862,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
                 resultant += (edge[i] - circle[k].centre).normalized();
                 ++n;
             }
-        // The resultant's share of the points is 0.64 for a half circle, 0.83 for a third of one.
-        // A disc with neighbours on several sides keeps only a short arc of its own: that arc
-        // is trusted when it fits its circle closely.
-        const double resultantShare =
-            resultant.norm() / static_cast<double>(std::max<std::size_t>(n, 1));
-        const bool covered = resultantShare < 0.7 || (resultantShare < kShortArcShare &&
-                                                      circle[k].rms <= kShortArcFitRms_px);
-        trusted[k] =
-            n >= 8 && covered && circle[k].rms <= kSplitFitRms_px && circle[k].radius >= 1.0;
+        trusted[k] = restsOnItsArc(circle[k], n, resultant);
         parts += trusted[k] ? 1U : 0U;
     }
     if (parts == 0 || parts < minParts)
@@ -867,13 +870,8 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     for (std::size_t k = 0; k < count; ++k) {
         if (!trusted[k])
             continue;
-        const double radius = circle[k].radius;
-        Blob part = framedBlob(m);
-        part.centre_px = {circle[k].centre.x() + m.left - 1, circle[k].centre.y() + m.top - 1};
-        part.area_px = static_cast<float>(3.14159265358979323846 * radius * radius);
-        part.elongation = 1.0F;
+        Blob part = discBlob(circle[k]);
         part.split = true;
-        part.fitRms_px = static_cast<float>(circle[k].rms);
         addCandidate(part, order + 1 + static_cast<std::uint32_t>(k));
     }
     ++counters_.splitBlobs;
