@@ -74,10 +74,22 @@ std::size_t separationBin(double separation) {
 /// (each point claimed once, markers in order); false for markers not seen by both cameras.
 std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points);
 
-/// Points of \a points within kFoundRadius_mm of a distinct true marker seen by both cameras.
-std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points);
+/// The blob of \a blobs nearest \a at_px when it lies within kAtMarker_px of it, else nullptr.
+const Blob* blobAt(std::span<const Blob> blobs, const Vec2& at_px);
 
 constexpr double kFoundRadius_mm = 2.0;
+/// A blob this near a marker's true centre in an image (px) is that marker's.
+constexpr double kAtMarker_px = 1.5;
+
+const Blob* blobAt(std::span<const Blob> blobs, const Vec2& at_px) {
+    const Blob* nearest = nullptr;
+    for (const Blob& b : blobs)
+        if (nearest == nullptr ||
+            (b.centre_px - at_px).norm() < (nearest->centre_px - at_px).norm())
+            nearest = &b;
+    return nearest != nullptr && (nearest->centre_px - at_px).norm() < kAtMarker_px ? nearest
+                                                                                    : nullptr;
+}
 
 std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points) {
     std::vector<bool> used(points.size(), false);
@@ -94,11 +106,6 @@ std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<co
             }
     }
     return found;
-}
-
-std::uint64_t countFound(const sim::Observation& observation, std::span<const Vec3> points) {
-    const std::vector<bool> found = foundMarkers(observation, points);
-    return static_cast<std::uint64_t>(std::count(found.begin(), found.end(), true));
 }
 
 } // namespace
@@ -188,15 +195,10 @@ int main(int argc, char** argv) {
                 if (!cut)
                     continue;
                 ++totals.cutImages;
-                const Blob* nearest = nullptr;
-                for (const Blob& b : pipeline.blobs(c))
-                    if (nearest == nullptr || (b.centre_px - m.pixel[camera]).norm() <
-                                                  (nearest->centre_px - m.pixel[camera]).norm())
-                        nearest = &b;
-                if (nearest != nullptr && (nearest->centre_px - m.pixel[camera]).norm() < 1.5) {
+                if (const Blob* b = blobAt(pipeline.blobs(c).span(), m.pixel[camera])) {
                     ++totals.cutWithBlob;
-                    totals.cutCentredByArc += nearest->cut ? 1U : 0U;
-                    totals.cutSquaredError += (nearest->centre_px - m.pixel[camera]).squaredNorm();
+                    totals.cutCentredByArc += b->cut ? 1U : 0U;
+                    totals.cutSquaredError += (b->centre_px - m.pixel[camera]).squaredNorm();
                 }
             }
             for (const Blob& b : pipeline.blobs(c)) {
@@ -206,7 +208,7 @@ int main(int argc, char** argv) {
                 for (const sim::MarkerView& m : observation.markers)
                     if (m.visible[camera])
                         nearest = std::min(nearest, (m.pixel[camera] - b.centre_px).norm());
-                if (nearest < 1.5) {
+                if (nearest < kAtMarker_px) {
                     ++totals.splitParts;
                     totals.splitSquaredError += nearest * nearest;
                 } else {
@@ -215,9 +217,10 @@ int main(int argc, char** argv) {
             }
         }
         exactBlobs.matchStereo();
-        totals.foundFromExactBlobs += countFound(observation, exactBlobs.points_rig_mm());
         {
             const std::vector<bool> exact = foundMarkers(observation, exactBlobs.points_rig_mm());
+            totals.foundFromExactBlobs +=
+                static_cast<std::uint64_t>(std::count(exact.begin(), exact.end(), true));
             const std::vector<bool> atImages = foundMarkers(observation, points);
             for (std::size_t i = 0; i < observation.markers.size(); ++i) {
                 if (!exact[i])
@@ -231,10 +234,8 @@ int main(int argc, char** argv) {
                             separation =
                                 std::min(separation, (other.pixel[c] - m.pixel[c]).norm() /
                                                          (m.radius_px[c] + other.radius_px[c]));
-                    bool near = false;
-                    for (const Blob& b : pipeline.blobs(static_cast<int>(c)))
-                        near = near || (b.centre_px - m.pixel[c]).norm() < 1.5;
-                    withoutBlob = withoutBlob || !near;
+                    withoutBlob = withoutBlob || blobAt(pipeline.blobs(static_cast<int>(c)).span(),
+                                                        m.pixel[c]) == nullptr;
                 }
                 const std::size_t bin = separationBin(separation);
                 ++totals.exactBySeparation[bin];
@@ -265,15 +266,9 @@ int main(int argc, char** argv) {
             if (nearest < 0) {
                 // Why: no blob where the marker projects (merged, rejected), or stereo missed it.
                 bool blobs = true;
-                for (int c = 0; c < 2; ++c) {
-                    const auto& list = pipeline.blobs(c);
-                    bool near = false;
-                    for (const Blob& b : list)
-                        near =
-                            near ||
-                            (b.centre_px - truth.pixel[static_cast<std::size_t>(c)]).norm() < 1.5;
-                    blobs = blobs && near;
-                }
+                for (int c = 0; c < 2; ++c)
+                    blobs = blobs && blobAt(pipeline.blobs(c).span(),
+                                            truth.pixel[static_cast<std::size_t>(c)]) != nullptr;
                 ++(blobs ? totals.missedByStereo : totals.missedNoBlob);
                 continue;
             }
