@@ -1,5 +1,6 @@
 // Tests of the blob detector against truth and against a plain flood-fill reference.
 #include <algorithm>
+#include <limits>
 #include <queue>
 #include <random>
 
@@ -42,6 +43,25 @@ sim::Glint disc(double x, double y, double radius, double peak = 900.0) {
     g.radiusMajor_px = g.radiusMinor_px = radius;
     g.peak_dn = peak;
     return g;
+}
+
+// The blob of \a blobs whose centre lies nearest \a at_px; nullptr when there is none.
+template <typename Blobs>
+const Blob* nearestBlob(const Blobs& blobs, const Vec2& at_px) {
+    const Blob* nearest = nullptr;
+    for (const Blob& b : blobs)
+        if (nearest == nullptr ||
+            (b.centre_px - at_px).norm() < (nearest->centre_px - at_px).norm())
+            nearest = &b;
+    return nearest;
+}
+
+// How far (px) the nearest blob's centre lies from \a at_px; infinity when there is no blob.
+template <typename Blobs>
+double distanceToNearestBlob(const Blobs& blobs, const Vec2& at_px) {
+    const Blob* nearest = nearestBlob(blobs, at_px);
+    return nearest == nullptr ? std::numeric_limits<double>::infinity()
+                              : (nearest->centre_px - at_px).norm();
 }
 
 // Reference: breadth-first 8-connected labelling and the same moments, pixel by pixel.
@@ -124,9 +144,7 @@ TEST(BlobDetector, CentresOfIsolatedDiscsAreSubPixel) {
     ASSERT_EQ(blobs.size(), spots.size());
     double sum = 0.0;
     for (const sim::Glint& g : spots) {
-        double nearest = 1e9;
-        for (const Blob& b : blobs)
-            nearest = std::min(nearest, (b.centre_px - g.centre_px).norm());
+        const double nearest = distanceToNearestBlob(blobs, g.centre_px);
         // Cutting the blurred edge at the threshold biases small discs by a few hundredths.
         EXPECT_LT(nearest, 0.06);
         sum += nearest;
@@ -228,11 +246,7 @@ TEST(BlobDetector, SplitsTouchingDiscsIntoTheirCentres) {
     EXPECT_EQ(blobs.size(), discs.size());
     double sum2 = 0.0;
     for (const sim::Glint& d : discs) {
-        const Blob* nearest = nullptr;
-        for (const Blob& b : blobs)
-            if (nearest == nullptr ||
-                (b.centre_px - d.centre_px).norm() < (nearest->centre_px - d.centre_px).norm())
-                nearest = &b;
+        const Blob* nearest = nearestBlob(blobs, d.centre_px);
         ASSERT_NE(nearest, nullptr);
         const double error = (nearest->centre_px - d.centre_px).norm();
         EXPECT_LT(error, 0.15) << "disc at " << d.centre_px.transpose();
@@ -264,10 +278,8 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherThatPassAsRound) {
     // Far over each other, a disc keeps less of its own outline: within 0.25 px each, 0.15 RMS.
     double sum2 = 0.0;
     for (const sim::Glint& d : discs) {
-        const Blob* nearest = &blobs[0];
-        for (const Blob& b : blobs)
-            if ((b.centre_px - d.centre_px).norm() < (nearest->centre_px - d.centre_px).norm())
-                nearest = &b;
+        const Blob* nearest = nearestBlob(blobs, d.centre_px);
+        ASSERT_NE(nearest, nullptr);
         const double error = (nearest->centre_px - d.centre_px).norm();
         EXPECT_LT(error, 0.25) << "disc at " << d.centre_px.transpose();
         sum2 += error * error;
@@ -293,9 +305,7 @@ TEST(BlobDetector, SplitsChainsOfMoreThanThreeDiscs) {
     detector.detect(image.pixels.data(), image.width, blobs);
     EXPECT_EQ(blobs.size(), discs.size());
     for (const sim::Glint& d : discs) {
-        double nearest = 1e9;
-        for (const Blob& b : blobs)
-            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        const double nearest = distanceToNearestBlob(blobs, d.centre_px);
         EXPECT_LT(nearest, 0.15) << "disc at " << d.centre_px.transpose();
     }
     EXPECT_EQ(detector.counters().splitBlobs, 2u);
@@ -319,9 +329,7 @@ TEST(BlobDetector, SplitsAClusterThatPassesAsRound) {
     EXPECT_EQ(detector.counters().rejectedNotRound, 0u) << "the cluster passes as round";
     EXPECT_EQ(blobs.size(), discs.size());
     for (const sim::Glint& d : discs) {
-        double nearest = 1e9;
-        for (const Blob& b : blobs)
-            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        const double nearest = distanceToNearestBlob(blobs, d.centre_px);
         EXPECT_LT(nearest, 0.2) << "disc at " << d.centre_px.transpose();
     }
     for (const Blob& b : blobs) {
@@ -353,9 +361,7 @@ TEST(BlobDetector, PlacesADiscThatKeepsAThirdOfItsOutline) {
     EXPECT_EQ(blobs.size(), discs.size());
     double sum2 = 0.0;
     for (const sim::Glint& d : discs) {
-        double nearest = 1e9;
-        for (const Blob& b : blobs)
-            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        const double nearest = distanceToNearestBlob(blobs, d.centre_px);
         EXPECT_LT(nearest, 0.25) << "disc at " << d.centre_px.transpose();
         sum2 += nearest * nearest;
     }
@@ -382,9 +388,7 @@ TEST(BlobDetector, SplitsTwoDiscsFarOverEachOtherWithinALargerBlob) {
     EXPECT_EQ(blobs.size(), discs.size());
     double sum2 = 0.0;
     for (const sim::Glint& d : discs) {
-        double nearest = 1e9;
-        for (const Blob& b : blobs)
-            nearest = std::min(nearest, (b.centre_px - d.centre_px).norm());
+        const double nearest = distanceToNearestBlob(blobs, d.centre_px);
         EXPECT_LT(nearest, 0.25) << "disc at " << d.centre_px.transpose();
         sum2 += nearest * nearest;
     }
@@ -418,10 +422,8 @@ TEST(BlobDetector, CentresADiscCutByAnEdgeFromItsVisibleArc) {
     detector.detect(image.pixels.data(), image.width, blobs);
     ASSERT_EQ(blobs.size(), discs.size());
     for (const sim::Glint& d : discs) {
-        const Blob* nearest = &blobs[0];
-        for (const Blob& b : blobs)
-            if ((b.centre_px - d.centre_px).norm() < (nearest->centre_px - d.centre_px).norm())
-                nearest = &b;
+        const Blob* nearest = nearestBlob(blobs, d.centre_px);
+        ASSERT_NE(nearest, nullptr);
         EXPECT_LT((nearest->centre_px - d.centre_px).norm(), 0.15)
             << "disc at " << d.centre_px.transpose();
         EXPECT_TRUE(nearest->cut) << "disc at " << d.centre_px.transpose();
