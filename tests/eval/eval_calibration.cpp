@@ -180,6 +180,7 @@ int main(int argc, char** argv) {
     bool verbose = false;
     bool trace = false;
     bool timeline = false;
+    bool visibleSets = false;
     std::int64_t traceEvery = 0;
     std::int64_t traceObject = -1, traceFrom = 0, traceTo = 0;
     app.add_option("--scene", sceneName);
@@ -199,6 +200,8 @@ int main(int argc, char** argv) {
     app.add_option("--allow-missing", allowMissing,
                    "with --require-complete, this many markers in all may be missing");
     app.add_flag("--verbose", verbose, "print the objects every second");
+    app.add_flag("--visible-sets", visibleSets,
+                 "each object's markers in view (of three or more), one line per unchanged run");
     app.add_flag("--timeline", timeline,
                  "with --verbose, the markers of each model in view every 5th frame");
     app.add_flag(
@@ -512,6 +515,24 @@ int main(int argc, char** argv) {
         // Sets seen together, merged while they share three markers, are what geometry alone
         // ties into one rigid layout; due markers in two or more such groups can be joined only
         // through motion across the frames between them.
+        if (visibleSets) {
+            // Runs of frames that show the same markers: which markers were ever seen together,
+            // for how long, is what ties an object's pieces.
+            const std::vector<std::uint64_t>& inView = inViewPerFrame[k];
+            std::size_t start = 0;
+            for (std::size_t f = 1; f <= inView.size(); ++f) {
+                if (f < inView.size() && inView[f] == inView[start])
+                    continue;
+                if (std::popcount(inView[start]) >= 3) {
+                    std::printf("    frames %zu-%zu:", start, f - 1);
+                    for (int m = 0; m < 64; ++m)
+                        if ((inView[start] >> m) & 1U)
+                            std::printf(" %d", m);
+                    std::printf("\n");
+                }
+                start = f;
+            }
+        }
         std::vector<std::uint64_t> groups(seenTogether[k].begin(), seenTogether[k].end());
         for (bool merged = true; merged;) {
             merged = false;
