@@ -184,6 +184,9 @@ private:
         }
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
+        /// Places (body frame, mm) where points sat in a few frames, too few to be markers: where
+        /// a piece of the same body, which holds them as markers, may register onto this one.
+        std::vector<Vec3> glimpsed_mm;
     };
     struct Site {
         Vec3 sum_mm = Vec3::Zero();

@@ -46,6 +46,35 @@ constexpr double kSpeedMargin = 1.5;
 /// (component-wise median).
 constexpr double kWanderFactor = 2.0;
 
+/// The placement of \a part (its markers, mm) on \a markers and \a glimpses of another body
+/// (its frame, mm) that puts at least four of its markers on them, two or more on markers and one
+/// or more on glimpses, and no other placement as many; none when there is no such placement.
+std::optional<RigidTransform> placeOnMarkersAndGlimpses(std::span<const Vec3> part,
+                                                        std::span<const Vec3> markers,
+                                                        std::span<const Vec3> glimpses,
+                                                        double sideTolerance_mm) {
+    if (glimpses.empty())
+        return std::nullopt;
+    std::vector<Vec3> places(markers.begin(), markers.end());
+    places.insert(places.end(), glimpses.begin(), glimpses.end());
+    const Registration r =
+        registerLayout(part, places, sideTolerance_mm, kRegistrationTolerance_mm);
+    if (r.matched < 4 || r.matched <= r.runnerUp)
+        return std::nullopt;
+    std::size_t onMarkers = 0, onGlimpses = 0;
+    for (const Vec3& m : part) {
+        const Vec3* hit =
+            nearestPoint(places, r.T_whole_from_part.apply(m), kRegistrationTolerance_mm);
+        if (hit && hit < places.data() + markers.size())
+            ++onMarkers;
+        else if (hit)
+            ++onGlimpses;
+    }
+    if (onMarkers < 2 || onGlimpses == 0)
+        return std::nullopt;
+    return r.T_whole_from_part;
+}
+
 } // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -155,6 +184,27 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                         return r.T_whole_from_part;
                     return std::nullopt;
                 };
+                const Consensus lone = consensus(true);
+                // Or one piece's markers lie on the other's markers and on places where the
+                // other glimpsed points for a few frames: the markers it holds that the other
+                // saw too briefly to learn. A body seen still against another for a moment is
+                // glimpsed so too; it is told apart by the motion where one piece leaves view
+                // and the other comes in, and by the frames both were found alone.
+                auto glimpsedPlacement = [&]() -> std::optional<RigidTransform> {
+                    if (lone.shared >= config_.minSharedFrames)
+                        return std::nullopt;
+                    std::optional<RigidTransform> tied =
+                        placeOnMarkersAndGlimpses(from.markers_mm, into.markers_mm,
+                                                  into.glimpsed_mm, config_.sameBodyTolerance_mm);
+                    if (!tied)
+                        if (const std::optional<RigidTransform> back = placeOnMarkersAndGlimpses(
+                                into.markers_mm, from.markers_mm, from.glimpsed_mm,
+                                config_.sameBodyTolerance_mm))
+                            tied = back->inverse();
+                    if (!tied || !movesOnSmoothly(session, into, from, *tied))
+                        return std::nullopt;
+                    return tied;
+                };
                 // Or, never in view together, one piece of a turning body may come into view just
                 // as the other leaves: the pose of the one, carried on at its speed, then lands
                 // on the other's pose by one relative pose, every time it happens.
@@ -164,7 +214,6 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // wherever one piece leaves and the other comes into view (a likeness between
                 // two objects puts the one body in two places at once). Pieces found alone
                 // together that did not move as one are not tied by a likeness.
-                const Consensus lone = consensus(true);
                 auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
                     if (lone.shared >= config_.minSharedFrames)
                         return std::nullopt;
@@ -178,6 +227,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 if ((T_into_from_from = lone.T_into_from_from))
                     ++counters_.joinedByMotion;
                 else if ((T_into_from_from = layoutPlacement()))
+                    ++counters_.joinedByLayout;
+                else if ((T_into_from_from = glimpsedPlacement()))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from = sharedTriangle()))
                     ++counters_.joinedByLayout;

@@ -26,6 +26,9 @@ constexpr double kScatterFactor = 3.0;
 /// Frames in which the cameras look at a place as it was seen, less than this apart, are one pass
 /// by it (s).
 constexpr double kPassGap_s = 0.1;
+/// A place where points sat in at least this many frames but too few to be a marker is kept as
+/// a glimpse of one (Body::glimpsed_mm).
+constexpr std::uint32_t kMinGlimpseFrames = 5;
 /// A place seen in fewer frames than minSeenShare of those that look at it is a marker when it
 /// was there in at least this share of at least kMinPasses passes.
 constexpr std::uint32_t kMinPasses = 3;
@@ -267,6 +270,26 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::vector<Vec3> markers;
     for (const std::size_t k : accepted)
         markers.push_back(place[k]);
+    // Glimpses: places seen in a few frames, too few for a marker, away from every marker.
+    std::vector<std::size_t> glimpsed;
+    for (std::size_t s = 0; s < sites_.size(); ++s)
+        if (sites_[s].hits >= kMinGlimpseFrames && sites_[s].hits < minHits)
+            glimpsed.push_back(s);
+    std::sort(glimpsed.begin(), glimpsed.end(), [&](std::size_t a, std::size_t b) {
+        if (sites_[a].hits != sites_[b].hits)
+            return sites_[a].hits > sites_[b].hits;
+        return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
+    });
+    std::vector<Vec3> glimpses;
+    for (const std::size_t s : glimpsed) {
+        const Vec3 mean = sites_[s].sum_mm / static_cast<double>(sites_[s].hits);
+        const auto near = [&](const Vec3& p) { return (p - mean).squaredNorm() < spacing2; };
+        if (std::none_of(markers.begin(), markers.end(), near) &&
+            std::none_of(glimpses.begin(), glimpses.end(), near))
+            glimpses.push_back(mean);
+    }
+    const bool glimpsesChanged = glimpses.size() != body.glimpsed_mm.size();
+    body.glimpsed_mm = std::move(glimpses);
     auto covered = [](std::span<const Vec3> set, const Vec3& p) {
         return std::any_of(set.begin(), set.end(),
                            [&](const Vec3& q) { return (q - p).squaredNorm() < 0.25; });
@@ -288,7 +311,7 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
                 body.edges.emplace_back(static_cast<std::uint16_t>(a),
                                         static_cast<std::uint16_t>(b));
         }
-    return added > 0 || removed > 0;
+    return added > 0 || removed > 0 || glimpsesChanged;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -292,6 +292,30 @@ TEST(CalibrationCompletion, JoinsTwoPiecesNeverSeenTogetherThatShareFourMarkers)
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
+// Two pieces of one body that share two markers: the first seen for four seconds, the second
+// two seconds later, and between them a tenth of a second in which the first piece's side shows
+// the second piece's two other markers beside it. Too brief to make them the first piece's
+// markers, those glimpses are where the second piece's layout lands on the first, four markers
+// in one place: the pieces are one body.
+TEST(CalibrationCompletion, JoinsAPieceWhoseMarkersTheOtherGlimpsedBriefly) {
+    const std::vector<Vec3> body = test::irregularLayout(9, 27, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 13, [](std::size_t, std::size_t m, double t) {
+            if (t < 4.0)
+                return m <= 6;
+            if (t < 4.1)
+                return m <= 4 || m >= 7;
+            return t >= 6.0 && m >= 5;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 5, 4)});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 1U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 1U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
 // Two pieces of one body that share exactly three markers, seen twenty seconds apart with
 // nothing in view between: no frame poses both and no chain of frames leads from one to the
 // other. The triangle they share, like no other of either, is the only tie, and it holds.
