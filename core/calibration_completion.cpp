@@ -9,10 +9,13 @@
 #include <numeric>
 #include <optional>
 
+#include "core/completion_geometry.hpp"
 #include "core/marker_set.hpp"
 #include "core/rigid_fit.hpp"
 
 namespace edgetrack {
+
+using namespace completion_detail;
 
 CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
     : config_(config) {
@@ -197,11 +200,51 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
         ++alive;
     if (alive == 0)
         return;
+    // The poses a body took from a piece joined to it: the joined body may need more of its
+    // markers to be found afresh than the piece shows (its S_min), though the piece's poses hold.
+    std::vector<std::vector<RigidTransform>> was(alive);
+    for (std::size_t b = 0; b < alive; ++b)
+        if (!bodies_[b].posedByJoin.empty())
+            was[b] = bodies_[b].T_rig_from_body;
     std::vector<PoseTrack> tracks;
     for (std::size_t b = 0; b < alive; ++b)
         tracks.push_back({&bodies_[b].posed, &bodies_[b].T_rig_from_body});
     trackBothWays(session, trackingModels(alive), tracks);
     poseFromTriangles(session);
+    for (std::size_t b = 0; b < alive; ++b)
+        if (!bodies_[b].posedByJoin.empty())
+            keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
+}
+
+void CalibrationCompletion::keepJoinedPosesThatStillFit(const SessionBuffer& session, Body& body,
+                                                        std::span<const RigidTransform> was) {
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    std::vector<Vec3> others, from, to;
+    const std::vector<std::uint8_t>& joined = body.posedByJoin;
+    for (std::size_t f = 0; f < session.frames() && f < joined.size() && f < was.size(); ++f) {
+        if (body.posed[f] || !joined[f])
+            continue;
+        // Points another body was found on in this frame are not this one's.
+        markersOfOthersAt(f, body, OtherBodies::All, others);
+        const std::span<const Vec3> points = session.points(f);
+        from.clear();
+        to.clear();
+        for (const Vec3& m : body.markers_mm) {
+            const Vec3* match = nearestPoint(points, was[f].apply(m), radius);
+            if (match && !nearAny(others, *match, radius * radius)) {
+                from.push_back(m);
+                to.push_back(*match);
+            }
+        }
+        if (from.size() < config_.tracking.minTrackedMarkers)
+            continue;
+        const std::optional<RigidFit> fit = fitRigid(from, to);
+        if (!fit || fit->rms_mm > config_.tracking.maxRms_mm)
+            continue;
+        body.posed[f] = 1;
+        body.T_rig_from_body[f] = fit->transform;
+        ++counters_.framesKept;
+    }
 }
 
 void CalibrationCompletion::trackBothWays(const SessionBuffer& session,

@@ -103,6 +103,9 @@ struct CompletionCounters {
     std::uint64_t framesFollowed = 0;
     /// Frames in which a body was posed from three of its markers (a unique triangle).
     std::uint64_t framesFromTriangles = 0;
+    /// Frames in which a body kept a pose it took from a joined piece, not found again by the
+    /// tracker.
+    std::uint64_t framesKept = 0;
     std::uint64_t seeds = 0;
     /// Bodies found in the session's points that no seed explained.
     std::uint64_t discovered = 0;
@@ -169,6 +172,8 @@ private:
         std::vector<std::pair<std::uint16_t, std::uint16_t>> edges;
         std::vector<RigidTransform> T_rig_from_body;
         std::vector<std::uint8_t> posed;
+        /// Frames whose pose came from a piece joined to it (the piece's pose).
+        std::vector<std::uint8_t> posedByJoin;
         /// Its poses when tracked with no other body: where pieces of one object share markers,
         /// the joint tracker gives the shared points to one of them, and the other goes unposed.
         std::vector<RigidTransform> T_rig_from_body_alone;
@@ -212,6 +217,11 @@ private:
                            std::vector<Vec3>& out) const;
     /// \brief Every alive body tracked together (bodies_ sorted alive first, largest first).
     void trackAll(const SessionBuffer& session);
+    /// \brief Poses that \a body took from a piece joined to it (Body::posedByJoin, \a was) and
+    /// the tracker did not find again, kept where its markers still fit the points: a body joined
+    /// from pieces may need more markers to be found afresh than a piece of it shows.
+    void keepJoinedPosesThatStillFit(const SessionBuffer& session, Body& body,
+                                     std::span<const RigidTransform> was);
     /// \brief \a models tracked together through the session forwards and backwards; model k's
     /// poses go to \a tracks[k].
     void trackBothWays(const SessionBuffer& session, const std::vector<MarkerModel>& models,

@@ -46,33 +46,54 @@ constexpr double kSpeedMargin = 1.5;
 /// (component-wise median).
 constexpr double kWanderFactor = 2.0;
 
-/// The placement of \a part (its markers, mm) on \a markers and \a glimpses of another body
-/// (its frame, mm) that puts at least four of its markers on them, two or more on markers and one
-/// or more on glimpses, and no other placement as many; none when there is no such placement.
-std::optional<RigidTransform> placeOnMarkersAndGlimpses(std::span<const Vec3> part,
-                                                        std::span<const Vec3> markers,
-                                                        std::span<const Vec3> glimpses,
-                                                        double sideTolerance_mm) {
-    if (glimpses.empty())
-        return std::nullopt;
-    std::vector<Vec3> places(markers.begin(), markers.end());
-    places.insert(places.end(), glimpses.begin(), glimpses.end());
-    const Registration r =
-        registerLayout(part, places, sideTolerance_mm, kRegistrationTolerance_mm);
-    if (r.matched < 4 || r.matched <= r.runnerUp)
-        return std::nullopt;
-    std::size_t onMarkers = 0, onGlimpses = 0;
-    for (const Vec3& m : part) {
-        const Vec3* hit =
-            nearestPoint(places, r.T_whole_from_part.apply(m), kRegistrationTolerance_mm);
-        if (hit && hit < places.data() + markers.size())
-            ++onMarkers;
-        else if (hit)
-            ++onGlimpses;
+/// Markers and glimpses of one body, as one list of places (its frame, mm): markers first.
+struct SeenPlaces {
+    std::vector<Vec3> places_mm;
+    std::size_t markers = 0;
+
+    SeenPlaces(std::span<const Vec3> markers_mm, std::span<const Vec3> glimpses_mm)
+        : places_mm(markers_mm.begin(), markers_mm.end())
+        , markers(markers_mm.size()) {
+        places_mm.insert(places_mm.end(), glimpses_mm.begin(), glimpses_mm.end());
     }
-    if (onMarkers < 2 || onGlimpses == 0)
+    /// Whether \a part placed by \a T_whole_from_part puts two or more of its markers on markers
+    /// and one or more on glimpses: a tie that the glimpses made.
+    bool tiedByGlimpses(std::span<const Vec3> part, const RigidTransform& T_whole_from_part) const {
+        std::size_t onMarkers = 0, onGlimpses = 0;
+        for (const Vec3& m : part) {
+            const Vec3* hit =
+                nearestPoint(places_mm, T_whole_from_part.apply(m), kRegistrationTolerance_mm);
+            if (hit && hit < places_mm.data() + markers)
+                ++onMarkers;
+            else if (hit)
+                ++onGlimpses;
+        }
+        return onMarkers >= 2 && onGlimpses > 0;
+    }
+};
+
+/// The placement of \a part (its markers, mm) on another body's markers and glimpses that puts at
+/// least four of its markers on them, two or more on markers and one or more on glimpses, and no
+/// other placement as many; or, with \a triangle, that puts three on them by a triangle like no
+/// other of either; none when there is no such placement.
+std::optional<RigidTransform> placeOnGlimpses(std::span<const Vec3> part, const SeenPlaces& seen,
+                                              double sideTolerance_mm, bool triangle) {
+    if (seen.places_mm.size() == seen.markers)
         return std::nullopt;
-    return r.T_whole_from_part;
+    std::optional<RigidTransform> placed;
+    if (triangle) {
+        placed = soleSharedTriangle(part, seen.places_mm, kRegistrationTolerance_mm,
+                                    kTriangleUniqueness * kRegistrationTolerance_mm,
+                                    kTriangleComparisons);
+    } else {
+        const Registration r =
+            registerLayout(part, seen.places_mm, sideTolerance_mm, kRegistrationTolerance_mm);
+        if (r.matched >= 4 && r.matched > r.runnerUp)
+            placed = r.T_whole_from_part;
+    }
+    if (!placed || !seen.tiedByGlimpses(part, *placed))
+        return std::nullopt;
+    return placed;
 }
 
 } // namespace
@@ -190,30 +211,21 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // saw too briefly to learn. A body seen still against another for a moment is
                 // glimpsed so too; it is told apart by the motion where one piece leaves view
                 // and the other comes in, and by the frames both were found alone.
-                auto glimpsedPlacement = [&]() -> std::optional<RigidTransform> {
+                auto glimpsedPlacement = [&](bool triangle) -> std::optional<RigidTransform> {
                     if (lone.shared >= config_.minSharedFrames)
                         return std::nullopt;
-                    std::optional<RigidTransform> tied =
-                        placeOnMarkersAndGlimpses(from.markers_mm, into.markers_mm,
-                                                  into.glimpsed_mm, config_.sameBodyTolerance_mm);
+                    std::optional<RigidTransform> tied = placeOnGlimpses(
+                        from.markers_mm, SeenPlaces(into.markers_mm, into.glimpsed_mm),
+                        config_.sameBodyTolerance_mm, triangle);
                     if (!tied)
-                        if (const std::optional<RigidTransform> back = placeOnMarkersAndGlimpses(
-                                into.markers_mm, from.markers_mm, from.glimpsed_mm,
-                                config_.sameBodyTolerance_mm))
+                        if (const std::optional<RigidTransform> back = placeOnGlimpses(
+                                into.markers_mm, SeenPlaces(from.markers_mm, from.glimpsed_mm),
+                                config_.sameBodyTolerance_mm, triangle))
                             tied = back->inverse();
                     if (!tied || !movesOnSmoothly(session, into, from, *tied))
                         return std::nullopt;
                     return tied;
                 };
-                // Or, never in view together, one piece of a turning body may come into view just
-                // as the other leaves: the pose of the one, carried on at its speed, then lands
-                // on the other's pose by one relative pose, every time it happens.
-                // Or they share exactly three markers and are never in view together beyond
-                // them: the triangle is their only tie. It is taken only when no other triangle
-                // of either is like it, and when the body the two would make moves on smoothly
-                // wherever one piece leaves and the other comes into view (a likeness between
-                // two objects puts the one body in two places at once). Pieces found alone
-                // together that did not move as one are not tied by a likeness.
                 auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
                     if (lone.shared >= config_.minSharedFrames)
                         return std::nullopt;
@@ -228,9 +240,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                     ++counters_.joinedByMotion;
                 else if ((T_into_from_from = layoutPlacement()))
                     ++counters_.joinedByLayout;
-                else if ((T_into_from_from = glimpsedPlacement()))
+                else if ((T_into_from_from = glimpsedPlacement(false)))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from = sharedTriangle()))
+                    ++counters_.joinedByLayout;
+                else if ((T_into_from_from = glimpsedPlacement(true)))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from = relativePoseAcrossHandovers(session, into, from)))
                     ++counters_.joinedByHandover;
@@ -255,9 +269,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             // Its co-visibility is measured again from the poses.
             into.edges.clear();
             const RigidTransform fromFromInto = T_into_from_from->inverse();
+            into.posedByJoin.resize(frames, 0);
             for (std::size_t f = 0; f < frames; ++f)
                 if (!into.posed[f] && from.posed[f]) {
                     into.posed[f] = 1;
+                    into.posedByJoin[f] = 1;
                     into.T_rig_from_body[f] = from.T_rig_from_body[f] * fromFromInto;
                 }
             from.alive = false;

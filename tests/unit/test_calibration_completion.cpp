@@ -316,6 +316,31 @@ TEST(CalibrationCompletion, JoinsAPieceWhoseMarkersTheOtherGlimpsedBriefly) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
+// As above, with only one of the second piece's other markers glimpsed: the triangle of the two
+// shared markers and the glimpse, like no other of either piece, is the tie.
+TEST(CalibrationCompletion, JoinsAPieceTiedByTwoSharedMarkersAndAGlimpse) {
+    const std::vector<Vec3> body = test::irregularLayout(9, 28, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 13, [](std::size_t, std::size_t m, double t) {
+            if (t < 4.0)
+                return m <= 6;
+            if (t < 4.1)
+                return m <= 4 || m == 7;
+            return t >= 6.0 && m >= 5;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    // The condition of the scene: the triangle of markers 5, 6 and 7 is like no other.
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 5, 4), subset(body, 0, 8), 0.5,
+                                                      2.0, 1000000));
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 5, 4)});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 1U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), body.size());
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
 // Two pieces of one body that share exactly three markers, seen twenty seconds apart with
 // nothing in view between: no frame poses both and no chain of frames leads from one to the
 // other. The triangle they share, like no other of either, is the only tie, and it holds.
