@@ -25,7 +25,7 @@ struct CalibrationConfig {
     /// Objects (graphs) alive at once, the whole scene at the start included.
     std::size_t maxObjects = 32;
     /// Markers per object graph; at most MarkerSet::kCapacity (128).
-    std::size_t maxMarkersPerObject = 96;
+    std::size_t maxMarkersPerObject = 128;
     /// Markers known at once over all objects, occluded ones included.
     std::size_t maxMarkers = 512;
     /// N of the paper: the running distance of an edge averages about this many frames.
