@@ -635,9 +635,18 @@ int main(int argc, char** argv) {
     else
         std::printf("online stage never complete\n");
     const bool anyLearnable = std::any_of(final.objects.begin(), final.objects.end(), learnable);
-    std::printf("result: %s\n", !anyLearnable                   ? "not learnable"
-                                : complete(final, allowMissing) ? "right"
-                                                                : "WRONG");
+    // A run that refused data for lack of room is not right, whatever its models: the capacities
+    // are the configuration's promise to hold a session like this one.
+    const CompletionCounters& refused = completionCounters;
+    const bool overflowed = c.markerOverflow + c.objectOverflow + c.memberOverflow +
+                                refused.siteOverflow + refused.modelOverflow +
+                                refused.markerOverflow >
+                            0;
+    if (overflowed)
+        std::printf("capacity overflow: data was refused\n");
+    std::printf("result: %s\n", !anyLearnable                                  ? "not learnable"
+                                : complete(final, allowMissing) && !overflowed ? "right"
+                                                                               : "WRONG");
     std::printf(
         "counters: born %llu, reappeared %llu, invalid %llu, edges broken %llu, splits %llu,"
         " collapsed %llu, merged %llu, deferred %llu, refound %llu (budget out %llu),"
