@@ -209,7 +209,8 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     std::vector<PoseTrack> tracks;
     for (std::size_t b = 0; b < alive; ++b)
         tracks.push_back({&bodies_[b].posed, &bodies_[b].T_rig_from_body});
-    trackBothWays(session, trackingModels(alive), tracks);
+    roundModels_ = trackingModels(alive);
+    trackBothWays(session, roundModels_, tracks);
     poseFromTriangles(session);
     for (std::size_t b = 0; b < alive; ++b)
         if (!bodies_[b].posedByJoin.empty())

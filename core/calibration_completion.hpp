@@ -178,6 +178,8 @@ private:
         /// the joint tracker gives the shared points to one of them, and the other goes unposed.
         std::vector<RigidTransform> T_rig_from_body_alone;
         std::vector<std::uint8_t> posedAlone;
+        /// The model those poses were tracked with: tracked alone again only when it changed.
+        std::optional<MarkerModel> trackedAloneAs;
         bool alive = true;
         /// Stable over the rounds (bodies_ is sorted): which body this is.
         std::uint32_t id = 0;
@@ -282,6 +284,8 @@ private:
     bool valid_ = false;
     CompletionCounters counters_{};
     std::vector<Body> bodies_;
+    /// The alive bodies' models as trackAll() last tracked them (bodies_ order).
+    std::vector<MarkerModel> roundModels_;
     std::uint32_t nextBodyId_ = 0;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;

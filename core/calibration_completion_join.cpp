@@ -96,6 +96,26 @@ std::optional<RigidTransform> placeOnGlimpses(std::span<const Vec3> part, const 
     return placed;
 }
 
+/// A marker that moved less than this (mm) since a body was tracked alone leaves its lone poses
+/// standing: the tracker matches within 1.5 mm, and measure() moves markers by hundredths of a
+/// millimetre from round to round.
+constexpr double kSameMarker_mm = 0.1;
+
+/// Whether \a a and \a b track alike: markers in the same order within kSameMarker_mm, the same
+/// edges and S_min.
+bool tracksAlike(const MarkerModel& a, const MarkerModel& b) {
+    const auto sameMarker = [](const Vec3& x, const Vec3& y) {
+        return (x - y).squaredNorm() <= kSameMarker_mm * kSameMarker_mm;
+    };
+    const auto sameEdge = [](const ModelEdge& x, const ModelEdge& y) {
+        return x.from == y.from && x.to == y.to;
+    };
+    return a.sMin == b.sMin && a.sameShapeAs == b.sameShapeAs &&
+           std::equal(a.markers_model_mm.begin(), a.markers_model_mm.end(),
+                      b.markers_model_mm.begin(), b.markers_model_mm.end(), sameMarker) &&
+           std::equal(a.edges.begin(), a.edges.end(), b.edges.begin(), b.edges.end(), sameEdge);
+}
+
 } // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -113,12 +133,21 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     // come first (trackAll sorted them), so their models are those of the joint tracking.
     // Tracked alone only when a pair needs it: most pairs are told apart by the joint tracking,
     // and each lone pass costs as much as the joint one.
-    const std::vector<MarkerModel> models = trackingModels(alive);
+    // The models of this round's tracking: following has moved no marker since (S_min, computed
+    // for every pair of bodies, is the costly part).
+    const std::vector<MarkerModel>& models = roundModels_;
+    if (models.size() != alive)
+        return false;
     std::vector<char> trackedAlone(alive, 0);
     auto trackAlone = [&](std::size_t b) {
         if (trackedAlone[b])
             return;
         trackedAlone[b] = 1;
+        // Its lone poses depend on its model alone: unchanged since a round before, they stand.
+        Body& body = bodies_[b];
+        if (body.trackedAloneAs && tracksAlike(*body.trackedAloneAs, models[b]))
+            return;
+        body.trackedAloneAs.emplace(config_.maxMarkersPerModel).assign(models[b]);
         std::vector<MarkerModel> alone;
         alone.emplace_back(config_.maxMarkersPerModel).assign(models[b]);
         alone.back().id = 0;
