@@ -155,15 +155,22 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
 
     // Places seen long enough, strongest first; of two closer than a marker's size, the stronger.
     const auto minHits = static_cast<std::uint32_t>(std::ceil(config_.minSeen_s * frameRate_hz_));
-    std::vector<std::size_t> candidates;
-    for (std::size_t s = 0; s < sites_.size(); ++s)
-        if (sites_[s].hits >= std::max<std::uint32_t>(minHits, 2))
-            candidates.push_back(s);
-    std::sort(candidates.begin(), candidates.end(), [&](std::size_t a, std::size_t b) {
-        if (sites_[a].hits != sites_[b].hits)
-            return sites_[a].hits > sites_[b].hits;
-        return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
-    });
+    // The places seen in [fewest, most) frames, most often seen first (ties by position, so that
+    // the order of points in a frame does not matter).
+    auto strongestSites = [&](std::uint32_t fewest, std::uint32_t most) {
+        std::vector<std::size_t> sites;
+        for (std::size_t s = 0; s < sites_.size(); ++s)
+            if (sites_[s].hits >= fewest && sites_[s].hits < most)
+                sites.push_back(s);
+        std::sort(sites.begin(), sites.end(), [&](std::size_t a, std::size_t b) {
+            if (sites_[a].hits != sites_[b].hits)
+                return sites_[a].hits > sites_[b].hits;
+            return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
+        });
+        return sites;
+    };
+    const std::vector<std::size_t> candidates =
+        strongestSites(std::max<std::uint32_t>(minHits, 2), UINT32_MAX);
     std::vector<Vec3> place;
     const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
     for (const std::size_t s : candidates) {
@@ -271,17 +278,8 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     for (const std::size_t k : accepted)
         markers.push_back(place[k]);
     // Glimpses: places seen in a few frames, too few for a marker, away from every marker.
-    std::vector<std::size_t> glimpsed;
-    for (std::size_t s = 0; s < sites_.size(); ++s)
-        if (sites_[s].hits >= kMinGlimpseFrames && sites_[s].hits < minHits)
-            glimpsed.push_back(s);
-    std::sort(glimpsed.begin(), glimpsed.end(), [&](std::size_t a, std::size_t b) {
-        if (sites_[a].hits != sites_[b].hits)
-            return sites_[a].hits > sites_[b].hits;
-        return canonicallyBefore(sites_[a].sum_mm, sites_[b].sum_mm);
-    });
     std::vector<Vec3> glimpses;
-    for (const std::size_t s : glimpsed) {
+    for (const std::size_t s : strongestSites(kMinGlimpseFrames, minHits)) {
         const Vec3 mean = sites_[s].sum_mm / static_cast<double>(sites_[s].hits);
         const auto near = [&](const Vec3& p) { return (p - mean).squaredNorm() < spacing2; };
         if (std::none_of(markers.begin(), markers.end(), near) &&
