@@ -11,6 +11,9 @@ namespace edgetrack::recording {
 
 namespace {
 
+/// The largest integer a row's double holds exactly (2^53).
+constexpr std::int64_t kMaxExactInteger = std::int64_t{1} << 53;
+
 std::string_view trim(std::string_view s) {
     while (!s.empty() && (s.front() == ' ' || s.front() == '\t'))
         s.remove_prefix(1);
@@ -115,6 +118,12 @@ Result<CsvTable> parseCsv(std::string_view text, std::string_view name,
                 if (field.empty() || ec != std::errc{} || end != last)
                     return lineError(name, lineNumber,
                                      "field '" + column + "' is not an integer: " + quoted(field));
+                // Rows hold doubles: an integer beyond 2^53 would not come back as itself (and
+                // 2^63 - 1 comes back as 2^63, which no int64 holds).
+                if (value > kMaxExactInteger || value < -kMaxExactInteger)
+                    return lineError(name, lineNumber,
+                                     "field '" + column +
+                                         "' is out of range (at most 2^53): " + quoted(field));
                 row.values[i] = static_cast<double>(value);
             } else {
                 double value = 0.0;

@@ -86,6 +86,21 @@ TEST(Csv, FractionInAnIntegerField) {
               "rec/blobs.csv:2: field 'frame' is not an integer: \"0.5\"");
 }
 
+// A row holds doubles: an integer it would not give back exactly is refused, not rounded (the
+// fuzzer's 9223372036854775807 came back as 2^63, outside every int64).
+TEST(Csv, IntegerBeyondWhatADoubleHoldsExactly) {
+    EXPECT_EQ(errorOf("frame,camera,u,v\n9223372036854775807,0,1,2\n"),
+              "rec/blobs.csv:2: field 'frame' is out of range (at most 2^53): "
+              "\"9223372036854775807\"");
+    EXPECT_EQ(errorOf("frame,camera,u,v\n0,-9007199254740993,1,2\n"),
+              "rec/blobs.csv:2: field 'camera' is out of range (at most 2^53): "
+              "\"-9007199254740993\"");
+    const Result<CsvTable> atLimit =
+        parseCsv("frame,camera,u,v\n9007199254740992,0,1,2\n", "rec/blobs.csv", kBlobColumns);
+    ASSERT_TRUE(atLimit.isValid());
+    EXPECT_EQ(atLimit.value().rows[0].integer(0), std::int64_t{1} << 53);
+}
+
 TEST(Csv, NanAndInfinity) {
     EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,nan,2\n"),
               "rec/blobs.csv:2: field 'u' is \"nan\": NaN and infinity are not allowed");
