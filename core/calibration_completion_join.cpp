@@ -235,45 +235,56 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                     return std::nullopt;
                 };
                 const Consensus lone = consensus(true);
+                // The ties below are likenesses of layout, with no frame that poses both pieces.
+                // One is taken only for pieces not found alone together often (those found so
+                // that did not move as one are not tied by a likeness), and only when the body the
+                // two would make moves on smoothly wherever one piece leaves view and the other
+                // comes in: a likeness between two objects puts the one body in two places at once.
+                auto tieByLikeness = [&](auto&& place) -> std::optional<RigidTransform> {
+                    if (lone.shared >= config_.minSharedFrames)
+                        return std::nullopt;
+                    const std::optional<RigidTransform> tied = place();
+                    if (!tied || !movesOnSmoothly(session, into, from, *tied))
+                        return std::nullopt;
+                    return tied;
+                };
                 // Or one piece's markers lie on the other's markers and on places where the
                 // other glimpsed points for a few frames: the markers it holds that the other
-                // saw too briefly to learn. A body seen still against another for a moment is
-                // glimpsed so too; it is told apart by the motion where one piece leaves view
-                // and the other comes in, and by the frames both were found alone.
+                // saw too briefly to learn (a body seen still against another for a moment is
+                // glimpsed so too).
                 auto glimpsedPlacement = [&](bool triangle) -> std::optional<RigidTransform> {
-                    if (lone.shared >= config_.minSharedFrames)
-                        return std::nullopt;
-                    std::optional<RigidTransform> tied = placeOnGlimpses(
-                        from.markers_mm, SeenPlaces(into.markers_mm, into.glimpsed_mm),
-                        config_.sameBodyTolerance_mm, triangle);
-                    if (!tied)
-                        if (const std::optional<RigidTransform> back = placeOnGlimpses(
-                                into.markers_mm, SeenPlaces(from.markers_mm, from.glimpsed_mm),
-                                config_.sameBodyTolerance_mm, triangle))
-                            tied = back->inverse();
-                    if (!tied || !movesOnSmoothly(session, into, from, *tied))
-                        return std::nullopt;
-                    return tied;
+                    if (const std::optional<RigidTransform> onInto = placeOnGlimpses(
+                            from.markers_mm, SeenPlaces(into.markers_mm, into.glimpsed_mm),
+                            config_.sameBodyTolerance_mm, triangle))
+                        return onInto;
+                    if (const std::optional<RigidTransform> onFrom = placeOnGlimpses(
+                            into.markers_mm, SeenPlaces(from.markers_mm, from.glimpsed_mm),
+                            config_.sameBodyTolerance_mm, triangle))
+                        return onFrom->inverse();
+                    return std::nullopt;
                 };
+                // Or they share exactly three markers and are never in view together beyond
+                // them: the triangle is their only tie, taken only when no other triangle of
+                // either is like it.
                 auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
-                    if (lone.shared >= config_.minSharedFrames)
-                        return std::nullopt;
-                    const std::optional<RigidTransform> tied = soleSharedTriangle(
+                    return soleSharedTriangle(
                         from.markers_mm, into.markers_mm, kRegistrationTolerance_mm,
                         kTriangleUniqueness * kRegistrationTolerance_mm, kTriangleComparisons);
-                    if (!tied || !movesOnSmoothly(session, into, from, *tied))
-                        return std::nullopt;
-                    return tied;
                 };
+                // Or, never in view together, one piece of a turning body may come into view just
+                // as the other leaves: the pose of the one, carried on at its speed, then lands
+                // on the other's pose by one relative pose, every time it happens.
                 if ((T_into_from_from = lone.T_into_from_from))
                     ++counters_.joinedByMotion;
                 else if ((T_into_from_from = layoutPlacement()))
                     ++counters_.joinedByLayout;
-                else if ((T_into_from_from = glimpsedPlacement(false)))
+                else if ((T_into_from_from =
+                              tieByLikeness([&] { return glimpsedPlacement(false); })))
                     ++counters_.joinedByLayout;
-                else if ((T_into_from_from = sharedTriangle()))
+                else if ((T_into_from_from = tieByLikeness(sharedTriangle)))
                     ++counters_.joinedByLayout;
-                else if ((T_into_from_from = glimpsedPlacement(true)))
+                else if ((T_into_from_from =
+                              tieByLikeness([&] { return glimpsedPlacement(true); })))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from = relativePoseAcrossHandovers(session, into, from)))
                     ++counters_.joinedByHandover;
