@@ -292,21 +292,25 @@ TEST(CalibrationCompletion, JoinsTwoPiecesNeverSeenTogetherThatShareFourMarkers)
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
-// Two pieces of one body that share two markers: the first seen for four seconds, the second
-// two seconds later, and between them a tenth of a second in which the first piece's side shows
-// the second piece's two other markers beside it. Too brief to make them the first piece's
-// markers, those glimpses are where the second piece's layout lands on the first, four markers
-// in one place: the pieces are one body.
+// Two pieces of one body, markers 0-6 and 5-8, that share markers 5 and 6: the first seen for
+// four seconds, the second two seconds later, and between them a tenth of a second in which the
+// first piece's markers 0-4 are seen with markers 7 to \a lastGlimpsed of the second.
+SessionBuffer twoPiecesWithAGlimpse(const std::vector<Vec3>& body, std::size_t lastGlimpsed) {
+    return sessionWhere({body}, 10.0, 0.05, 13, [=](std::size_t, std::size_t m, double t) {
+        if (t < 4.0)
+            return m <= 6;
+        if (t < 4.1)
+            return m <= 4 || (m >= 7 && m <= lastGlimpsed);
+        return t >= 6.0 && m >= 5;
+    });
+}
+
+// The glimpse shows both of the second piece's own markers. Too brief to make them the first
+// piece's markers, those glimpses are where the second piece's layout lands on the first, four
+// markers in one place: the pieces are one body.
 TEST(CalibrationCompletion, JoinsAPieceWhoseMarkersTheOtherGlimpsedBriefly) {
     const std::vector<Vec3> body = test::irregularLayout(9, 27, 15.0);
-    const SessionBuffer session =
-        sessionWhere({body}, 10.0, 0.05, 13, [](std::size_t, std::size_t m, double t) {
-            if (t < 4.0)
-                return m <= 6;
-            if (t < 4.1)
-                return m <= 4 || m >= 7;
-            return t >= 6.0 && m >= 5;
-        });
+    const SessionBuffer session = twoPiecesWithAGlimpse(body, 8);
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 5, 4)});
@@ -316,18 +320,11 @@ TEST(CalibrationCompletion, JoinsAPieceWhoseMarkersTheOtherGlimpsedBriefly) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
-// As above, with only one of the second piece's other markers glimpsed: the triangle of the two
-// shared markers and the glimpse, like no other of either piece, is the tie.
+// The glimpse shows only one of them: the triangle of the two shared markers and the glimpse,
+// like no other of either piece, is the tie.
 TEST(CalibrationCompletion, JoinsAPieceTiedByTwoSharedMarkersAndAGlimpse) {
     const std::vector<Vec3> body = test::irregularLayout(9, 28, 15.0);
-    const SessionBuffer session =
-        sessionWhere({body}, 10.0, 0.05, 13, [](std::size_t, std::size_t m, double t) {
-            if (t < 4.0)
-                return m <= 6;
-            if (t < 4.1)
-                return m <= 4 || m == 7;
-            return t >= 6.0 && m >= 5;
-        });
+    const SessionBuffer session = twoPiecesWithAGlimpse(body, 7);
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     // The condition of the scene: the triangle of markers 5, 6 and 7 is like no other.
