@@ -59,6 +59,8 @@ struct Report {
     /// lies from that object's nearest marker after the alignment (mm).
     std::vector<std::size_t> objectOfModel;
     std::vector<std::vector<double>> falseMarkerDistances_mm;
+    /// Per model: the markers of its object's layout that its markers lie on.
+    std::vector<std::vector<int>> layoutMarkersOfModel;
 };
 
 // The true marker (object, marker) seen at a rig position (mm), if any is within 1 mm.
@@ -100,6 +102,12 @@ Report evaluate(std::span<const MarkerModel> models, const std::vector<std::vect
         }
         const std::size_t k = bestObject;
         r.objectOfModel.push_back(k);
+        std::vector<int>& onLayout = r.layoutMarkersOfModel.emplace_back();
+        if (best.matched >= 4)
+            for (const int m : best.layoutMarkerOf)
+                if (m >= 0)
+                    onLayout.push_back(m);
+        std::sort(onLayout.begin(), onLayout.end());
         std::vector<double>& falseAt = r.falseMarkerDistances_mm.emplace_back();
         for (std::size_t i = 0; i < best.layoutMarkerOf.size(); ++i) {
             if (best.layoutMarkerOf[i] >= 0 && best.matched >= 4)
@@ -482,26 +490,29 @@ int main(int argc, char** argv) {
                     online.strayModels, online.falseMarkers,
                     complete(online) ? "complete" : "incomplete");
         const CompletionCounters& k = completionCounters;
-        std::printf("completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
-                    "followed, %llu posed from triangles, joined "
-                    "%llu by motion, %llu by layout and %llu by handover, dropped %llu, markers "
-                    "added %llu and removed "
-                    "%llu, overflow "
-                    "sites/models/markers %llu/%llu/%llu\n",
-                    completion_s, static_cast<unsigned long long>(k.seeds),
-                    static_cast<unsigned long long>(k.discovered),
-                    static_cast<unsigned long long>(k.rounds),
-                    static_cast<unsigned long long>(k.framesFollowed),
-                    static_cast<unsigned long long>(k.framesFromTriangles),
-                    static_cast<unsigned long long>(k.joinedByMotion),
-                    static_cast<unsigned long long>(k.joinedByLayout),
-                    static_cast<unsigned long long>(k.joinedByHandover),
-                    static_cast<unsigned long long>(k.dropped),
-                    static_cast<unsigned long long>(k.markersAdded),
-                    static_cast<unsigned long long>(k.markersRemoved),
-                    static_cast<unsigned long long>(k.siteOverflow),
-                    static_cast<unsigned long long>(k.modelOverflow),
-                    static_cast<unsigned long long>(k.markerOverflow));
+        std::printf(
+            "completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
+            "followed, %llu posed from triangles, joined "
+            "%llu by motion, %llu by layout and %llu by handover, dropped %llu and %llu seen "
+            "too briefly, markers "
+            "added %llu and removed "
+            "%llu, overflow "
+            "sites/models/markers %llu/%llu/%llu\n",
+            completion_s, static_cast<unsigned long long>(k.seeds),
+            static_cast<unsigned long long>(k.discovered),
+            static_cast<unsigned long long>(k.rounds),
+            static_cast<unsigned long long>(k.framesFollowed),
+            static_cast<unsigned long long>(k.framesFromTriangles),
+            static_cast<unsigned long long>(k.joinedByMotion),
+            static_cast<unsigned long long>(k.joinedByLayout),
+            static_cast<unsigned long long>(k.joinedByHandover),
+            static_cast<unsigned long long>(k.dropped),
+            static_cast<unsigned long long>(k.droppedSeenBriefly),
+            static_cast<unsigned long long>(k.markersAdded),
+            static_cast<unsigned long long>(k.markersRemoved),
+            static_cast<unsigned long long>(k.siteOverflow),
+            static_cast<unsigned long long>(k.modelOverflow),
+            static_cast<unsigned long long>(k.markerOverflow));
     }
     std::printf("models %zu (objects in scene %zu), stray models %zu, false markers %zu\n",
                 final.models, layouts.size(), final.strayModels, final.falseMarkers);
@@ -548,17 +559,34 @@ int main(int argc, char** argv) {
         for (std::size_t m = 0; m < expected[k].size() && m < 64; ++m)
             if (expected[k][m])
                 due |= std::uint64_t{1} << m;
-        const auto tiedGroups = std::count_if(groups.begin(), groups.end(),
-                                              [&](std::uint64_t g) { return (g & due) != 0; });
+        // A group whose due markers all lie in another group adds nothing to tie.
+        std::vector<std::uint64_t> duePart;
+        for (const std::uint64_t g : groups)
+            if ((g & due) != 0)
+                duePart.push_back(g & due);
+        std::sort(duePart.begin(), duePart.end());
+        duePart.erase(std::unique(duePart.begin(), duePart.end()), duePart.end());
+        const auto tiedGroups = std::count_if(duePart.begin(), duePart.end(), [&](std::uint64_t d) {
+            return std::none_of(duePart.begin(), duePart.end(), [&](std::uint64_t other) {
+                return other != d && (other & d) == d;
+            });
+        });
         if (learnable(o) && layouts[k].size() <= 64 && tiedGroups > 1)
             std::printf("    its due markers lie in %lld rigid groups that never share three "
                         "markers in view\n",
                         static_cast<long long>(tiedGroups));
     }
-    for (std::size_t i = 0; i < count; ++i)
+    for (std::size_t i = 0; i < count; ++i) {
         std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
                     models[i].markers_model_mm.size(), models[i].edges.size(), models[i].sMin,
                     models[i].sameShapeAs >= 0 ? " (same shape as another)" : "");
+        if (visibleSets && !final.layoutMarkersOfModel[i].empty()) {
+            std::printf("    on object %zu's markers:", final.objectOfModel[i]);
+            for (const int m : final.layoutMarkersOfModel[i])
+                std::printf(" %d", m);
+            std::printf("\n");
+        }
+    }
     if (verbose)
         for (std::size_t i = 0; i < count; ++i) {
             // Where each false marker lies: a marker learnt out of place, or one of another body.
