@@ -24,7 +24,7 @@ CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
              config.maxSites > 0 && config.minModelMarkers >= 4 && config.maxRounds > 0 &&
              config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0 &&
              config.triangleTolerance_mm > 0.0 && config.triangleUniqueness >= 2.0 &&
-             config.minTriangleRun >= 2;
+             config.minTriangleRun >= 2 && config.minModelSeen_s >= 0.0;
     if (!valid_)
         return;
     sites_.reserve(config.maxSites);
@@ -110,10 +110,18 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         if (body.alive)
             refine(session, body);
 
+    const auto minFramesInFour =
+        static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
     std::vector<const Body*> done;
-    for (const Body& body : bodies_)
-        if (body.alive && body.markers_mm.size() >= config_.minModelMarkers)
-            done.push_back(&body);
+    for (const Body& body : bodies_) {
+        if (!body.alive || body.markers_mm.size() < config_.minModelMarkers)
+            continue;
+        if (!body.seenInFour(config_.minModelMarkers, minFramesInFour)) {
+            ++counters_.droppedSeenBriefly;
+            continue;
+        }
+        done.push_back(&body);
+    }
     std::stable_sort(done.begin(), done.end(), [](const Body* a, const Body* b) {
         return a->markers_mm.size() > b->markers_mm.size();
     });

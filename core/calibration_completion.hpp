@@ -75,6 +75,10 @@ struct CompletionConfig {
     int refineIterations = 4;
     /// A model has at least this many markers.
     std::size_t minModelMarkers = 4;
+    /// ...of which at least minModelMarkers were each seen, with three others of it, this long
+    /// (s): a piece of an object that was shown only for a moment, and that nothing ties to the
+    /// rest, would otherwise be tracked as an object of its own.
+    double minModelSeen_s = 1.0;
     /// Where the cameras are, rig frame (mm): markers are seen from here.
     Vec3 viewpoint_rig_mm = Vec3::Zero();
     SminConfig smin{};
@@ -118,6 +122,9 @@ struct CompletionCounters {
     std::uint64_t joinedByHandover = 0;
     /// Objects dropped for having fewer than minModelMarkers markers in the end.
     std::uint64_t dropped = 0;
+    /// Objects not made models because too few of their markers were seen four at once for
+    /// minModelSeen_s.
+    std::uint64_t droppedSeenBriefly = 0;
     /// Markers found beyond the seeds', and seed markers not confirmed.
     std::uint64_t markersAdded = 0;
     std::uint64_t markersRemoved = 0;
@@ -194,6 +201,15 @@ private:
         /// Places (body frame, mm) where points sat in a few frames, too few to be markers: where
         /// a piece of the same body, which holds them as markers, may register onto this one.
         std::vector<Vec3> glimpsed_mm;
+        /// Per marker: frames of the last refine() in which it was found with three others.
+        std::vector<std::uint32_t> framesInFour;
+        /// \brief Whether at least \a markers of its markers were each seen in four for at
+        /// least \a frames frames.
+        bool seenInFour(std::size_t markers, std::uint32_t frames) const {
+            return static_cast<std::size_t>(
+                       std::count_if(framesInFour.begin(), framesInFour.end(),
+                                     [&](std::uint32_t n) { return n >= frames; })) >= markers;
+        }
     };
     struct Site {
         Vec3 sum_mm = Vec3::Zero();

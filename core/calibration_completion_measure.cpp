@@ -377,6 +377,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
         kRefineRadiusFactor * std::max(config_.siteRadius_mm, body.placeRadius_mm);
     std::vector<std::uint32_t> counts(n);
     std::vector<std::uint32_t> together(n * n, 0);
+    body.framesInFour.assign(n, 0);
     std::vector<Vec3> from, to;
     std::vector<std::size_t> which;
     // The normal equations of all poses and markers at once, poses eliminated (Schur complement):
@@ -415,10 +416,14 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
             for (const std::size_t k : which)
                 ++counts[k];
             addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
-            if (last)
-                for (std::size_t i = 0; i < which.size(); ++i)
-                    for (std::size_t j = i + 1; j < which.size(); ++j)
-                        ++together[which[i] * n + which[j]];
+            if (!last)
+                continue;
+            for (std::size_t i = 0; i < which.size(); ++i)
+                for (std::size_t j = i + 1; j < which.size(); ++j)
+                    ++together[which[i] * n + which[j]];
+            if (which.size() >= 4)
+                for (const std::size_t k : which)
+                    ++body.framesInFour[k];
         }
         // Markers no frame saw keep their place; the rest take the joint step. The step cannot
         // move the layout as a whole (poses follow), so that freedom is held by a small damping.

@@ -138,6 +138,7 @@ void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSetting
     s.real("place_radius_mm", completion.siteRadius_mm, 0.0, Section::kNoLimit, true);
     s.real("min_seen_s", completion.minSeen_s, 0.0, 3600.0);
     s.real("min_seen_share", completion.minSeenShare, 0.0, 1.0);
+    s.real("min_model_seen_s", completion.minModelSeen_s, 0.0, 3600.0);
     s.real("same_body_tolerance_mm", completion.sameBodyTolerance_mm, 0.0, Section::kNoLimit, true);
     s.real("triangle_tolerance_mm", completion.triangleTolerance_mm, 0.0, Section::kNoLimit, true);
     s.require(session.maxDuration_s >= session.minDuration_s, "max_duration_s",

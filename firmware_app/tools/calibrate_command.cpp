@@ -110,10 +110,10 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << " bodies found in the points, " << k.rounds << " rounds; "
             << k.joinedByMotion + k.joinedByLayout + k.joinedByHandover << " pieces joined, "
             << k.framesFollowed << " frames followed, " << k.framesFromTriangles
-            << " posed from three markers, " << k.dropped << " dropped; markers added "
-            << k.markersAdded << ", removed " << k.markersRemoved << "; refused: places "
-            << k.siteOverflow << ", models " << k.modelOverflow << ", markers " << k.markerOverflow
-            << "\n";
+            << " posed from three markers, " << k.dropped << " dropped, " << k.droppedSeenBriefly
+            << " seen too briefly; markers added " << k.markersAdded << ", removed "
+            << k.markersRemoved << "; refused: places " << k.siteOverflow << ", models "
+            << k.modelOverflow << ", markers " << k.markerOverflow << "\n";
     return Ok{};
 }
 

@@ -467,6 +467,26 @@ TEST(CalibrationCompletion, KeepsTwoBodiesSeenTogetherOnlyBrieflyApart) {
     EXPECT_EQ(completion.counters().joinedByMotion, 0U);
 }
 
+// A body shown for less than a second (a piece of an object seen in passing, which nothing ties
+// to the rest of it) is no model: it would be tracked as an object of its own. Shown for longer,
+// it is one.
+TEST(CalibrationCompletion, LeavesOutABodyShownForLessThanASecond) {
+    const std::vector<Vec3> a = test::irregularLayout(6, 19, 15.0);
+    const std::vector<Vec3> b = test::irregularLayout(5, 20, 15.0);
+    const CompletionConfig config;
+    for (const auto& [shown_s, expected] : {std::pair{0.6, 1U}, std::pair{1.4, 2U}}) {
+        const SessionBuffer session =
+            sessionWhere({a, b}, 10.0, 0.1, 9, [&](std::size_t body, std::size_t, double t) {
+                return body == 0 || (t >= 4.0 && t < 4.0 + shown_s);
+            });
+        CalibrationCompletion completion(config);
+        std::vector<MarkerModel> out = outputModels(config);
+        ASSERT_EQ(completion.run(session, modelsOf({a, b}), out), expected) << shown_s << " s";
+        EXPECT_LT(layoutError_mm(out[0], a), 0.08);
+        EXPECT_EQ(completion.counters().droppedSeenBriefly, 2U - expected);
+    }
+}
+
 TEST(CalibrationCompletion, KeepsTwoBodiesApartAndDropsWhatNothingShows) {
     const std::vector<Vec3> a = test::irregularLayout(10, 9, 15.0);
     const std::vector<Vec3> b = test::irregularLayout(8, 10, 15.0);
