@@ -13,6 +13,11 @@ namespace edgetrack::app {
 
 namespace {
 
+/// A body lost this recently (s) still has its blobs kept first where its last pose put them: in
+/// a burst of reflections, a body lost for a marker's sake is found again only if its markers'
+/// blobs keep their places (any window from 0.1 to 2 s gave the same in the burst test).
+constexpr double kExpectLost_s = 0.5;
+
 /// The host's steady clock: stage times are CPU work, also on the simulated board's virtual time.
 std::int64_t hostNanos() {
     return std::chrono::duration_cast<std::chrono::nanoseconds>(
@@ -625,12 +630,13 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
 }
 
 void Firmware::expectTrackedMarkers() {
-    // Every marker of a found body where its pose puts it now: next frame, a burst of reflections
-    // then costs stray blobs, not the tracked markers' (the found and the briefly hidden alike).
+    // Every marker of a found body where its pose puts it now, and of one lost for under
+    // kExpectLost_s where it last was: next frame, a burst of reflections then costs stray blobs,
+    // not the tracked markers' (the found and the briefly hidden alike).
     markers_.clearExpected();
     const std::span<const TrackedBody> tracked = tracker_->bodies();
     for (std::size_t b = 0; b < tracked.size() && b < models_.size(); ++b)
-        if (tracked[b].found())
+        if (tracked[b].found() || last_.time_s - tracked[b].lastFound_s <= kExpectLost_s)
             for (const Vec3& m : models_[b].model.markers_model_mm)
                 markers_.expect(tracked[b].T_rig_from_model.apply(m));
 }

@@ -244,9 +244,11 @@ TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
     // the image, as before, found both cubes in none of the burst frames), and a reflection that
     // touches a marker no longer takes it with it: their blob is split into its discs. The first
     // cube, with ten markers in view, stays found. The second is in view with only four: one lost
-    // marker for longer than the prediction horizon loses it until the search sees S_min of them
-    // (both found in 92 of the 100 burst frames on x86, 61 without the split; on aarch64, whose
-    // rounding differs, the second cube was lost for most of the 40 frames run there).
+    // marker for longer than the prediction horizon loses it until the search sees S_min of them,
+    // and blobs are kept first where its last pose put its markers for half a second after it
+    // was lost (both found in 95 of the 100 burst frames on x86, 93 without that, 61 without the
+    // split; on aarch64, whose rounding differs, the second cube was lost for most of the 40
+    // frames run there before the lost body's blobs were kept, so the slow targets ask less).
     // bench_firmware measures what the burst costs.
     int firstFound = 0, bothFound = 0;
     for (int f = 0; f < kBurstFrames; ++f) {
@@ -256,7 +258,12 @@ TEST(FirmwareOnSimBoard, ABurstOfSpuriousBlobsIsCountedAndTrackingHolds) {
     }
     sim->cameras.setSpuriousBurst(0);
     EXPECT_GE(firstFound, kBurstFrames * 95 / 100) << "of " << kBurstFrames << " burst frames";
-    EXPECT_GE(bothFound, kBurstFrames / 5) << "of " << kBurstFrames << " burst frames";
+#ifdef EDGETRACK_SLOW_TARGET
+    const int bothAtLeast = kBurstFrames / 5;
+#else
+    const int bothAtLeast = kBurstFrames * 95 / 100;
+#endif
+    EXPECT_GE(bothFound, bothAtLeast) << "of " << kBurstFrames << " burst frames";
     EXPECT_GE(firmware.counters().blobOverflow, kBurstFrames * 2u * 200u);
     EXPECT_EQ(firmware.counters().framesProcessed, 100u + kBurstFrames)
         << "no frame lost to the burst";
