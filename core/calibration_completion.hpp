@@ -201,6 +201,9 @@ private:
         /// Places (body frame, mm) where points sat in a few frames, too few to be markers: where
         /// a piece of the same body, which holds them as markers, may register onto this one.
         std::vector<Vec3> glimpsed_mm;
+        /// Its markers refined by least squares over its poses (refine(), the body left as it
+        /// is) before the join: the layout by which pieces are registered on each other.
+        std::vector<Vec3> refined_mm;
         /// Per marker: frames of the last refine() in which it was found with three others.
         std::vector<std::uint32_t> framesInFour;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
@@ -289,7 +292,12 @@ private:
     /// markers from them, within [siteRadius_mm, minMarkerSpacing_mm / 2].
     double placeRadiusOf(const SessionBuffer& session, const Body& body) const;
     bool measure(const SessionBuffer& session, Body& body);
-    void refine(const SessionBuffer& session, Body& body);
+    /// \brief Markers refined by least squares over every pose and marker at once (\a iterations
+    /// steps), with the poses fitted again, frames whose fit fails unposed, and the edges counted
+    /// anew.
+    void refine(const SessionBuffer& session, Body& body, int iterations);
+    /// \brief \a body's markers as refine() would place them, the body itself left as it is.
+    std::vector<Vec3> refinedMarkers(const SessionBuffer& session, const Body& body);
     void countEdges(const SessionBuffer& session, Body& body);
     /// Index of the site within siteRadius_mm of \a q_mm, or -1.
     std::int32_t siteNear(const Vec3& q_mm) const;

@@ -228,7 +228,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // layout lets them lie as well in another place.
                 auto layoutPlacement = [&]() -> std::optional<RigidTransform> {
                     const Registration r =
-                        registerLayout(from.markers_mm, into.markers_mm,
+                        registerLayout(from.refined_mm, into.refined_mm,
                                        config_.sameBodyTolerance_mm, kRegistrationTolerance_mm);
                     if (r.matched >= 4 && r.matched > r.runnerUp)
                         return r.T_whole_from_part;
@@ -254,11 +254,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // glimpsed so too).
                 auto glimpsedPlacement = [&](bool triangle) -> std::optional<RigidTransform> {
                     if (const std::optional<RigidTransform> onInto = placeOnGlimpses(
-                            from.markers_mm, SeenPlaces(into.markers_mm, into.glimpsed_mm),
+                            from.refined_mm, SeenPlaces(into.refined_mm, into.glimpsed_mm),
                             config_.sameBodyTolerance_mm, triangle))
                         return onInto;
                     if (const std::optional<RigidTransform> onFrom = placeOnGlimpses(
-                            into.markers_mm, SeenPlaces(from.markers_mm, from.glimpsed_mm),
+                            into.refined_mm, SeenPlaces(from.refined_mm, from.glimpsed_mm),
                             config_.sameBodyTolerance_mm, triangle))
                         return onFrom->inverse();
                     return std::nullopt;
@@ -268,7 +268,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // either is like it.
                 auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
                     return soleSharedTriangle(
-                        from.markers_mm, into.markers_mm, kRegistrationTolerance_mm,
+                        from.refined_mm, into.refined_mm, kRegistrationTolerance_mm,
                         kTriangleUniqueness * kRegistrationTolerance_mm, kTriangleComparisons);
                 };
                 // Or, never in view together, one piece of a turning body may come into view just
@@ -292,20 +292,25 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             if (!T_into_from_from)
                 continue;
             const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
-            for (const Vec3& m : from.markers_mm) {
-                const Vec3 moved = T_into_from_from->apply(m);
-                const bool known =
-                    std::any_of(into.markers_mm.begin(), into.markers_mm.end(), [&](const Vec3& n) {
+            // The piece's markers it does not have yet; its refined layout grows alike, for the
+            // pairs still to come this round.
+            const auto addNew = [&](std::vector<Vec3>& to, std::span<const Vec3> added) {
+                for (const Vec3& m : added) {
+                    const Vec3 moved = T_into_from_from->apply(m);
+                    const bool known = std::any_of(to.begin(), to.end(), [&](const Vec3& n) {
                         return (n - moved).squaredNorm() < spacing2;
                     });
-                if (known)
-                    continue;
-                if (into.markers_mm.size() == config_.maxMarkersPerModel) {
-                    ++counters_.markerOverflow;
-                    break;
+                    if (known)
+                        continue;
+                    if (to.size() == config_.maxMarkersPerModel)
+                        return false;
+                    to.push_back(moved);
                 }
-                into.markers_mm.push_back(moved);
-            }
+                return true;
+            };
+            if (!addNew(into.markers_mm, from.markers_mm))
+                ++counters_.markerOverflow;
+            addNew(into.refined_mm, from.refined_mm);
             // Its co-visibility is measured again from the poses.
             into.edges.clear();
             const RigidTransform fromFromInto = T_into_from_from->inverse();

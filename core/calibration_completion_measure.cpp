@@ -6,6 +6,7 @@
 #include <numbers>
 #include <numeric>
 #include <optional>
+#include <utility>
 
 #include "core/calibration_completion.hpp"
 #include "core/completion_geometry.hpp"
@@ -19,6 +20,9 @@ using namespace completion_detail;
 namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
+/// Steps of the joint least squares that place the layouts for the join (refinedMarkers()): one
+/// joined the same pieces as four in every sweep, at a quarter of the cost.
+constexpr int kJoinRefineIterations = 1;
 /// A place holds points within this many times the median distance of an object's points from
 /// its markers: for a 3D normal scatter the median distance is 1.5 sigma, so 3 times it holds all
 /// but one point in a thousand.
@@ -368,7 +372,19 @@ void addToReducedSystem(const RigidTransform& T_rig_from_body, std::span<const V
 
 } // namespace
 
-void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
+std::vector<Vec3> CalibrationCompletion::refinedMarkers(const SessionBuffer& session,
+                                                        const Body& body) {
+    // What refine() reads; the rest of a body (its lone track, its model) is not copied.
+    Body refined;
+    refined.markers_mm = body.markers_mm;
+    refined.T_rig_from_body = body.T_rig_from_body;
+    refined.posed = body.posed;
+    refined.placeRadius_mm = body.placeRadius_mm;
+    refine(session, refined, kJoinRefineIterations);
+    return std::move(refined.markers_mm);
+}
+
+void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int iterations) {
     const std::size_t frames = session.frames();
     const std::size_t n = body.markers_mm.size();
     if (n < 3)
@@ -386,8 +402,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body) {
     const auto dimension = static_cast<Eigen::Index>(3 * n);
     Eigen::MatrixXd reduced(dimension, dimension);
     Eigen::VectorXd rhs(dimension);
-    for (int iteration = 0; iteration < config_.refineIterations; ++iteration) {
-        const bool last = iteration + 1 == config_.refineIterations;
+    for (int iteration = 0; iteration < iterations; ++iteration) {
+        const bool last = iteration + 1 == iterations;
         std::fill(counts.begin(), counts.end(), 0U);
         reduced.setZero();
         rhs.setZero();
