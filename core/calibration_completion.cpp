@@ -86,13 +86,6 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         for (Body& body : bodies_)
             if (body.alive)
                 follow(session, body);
-        // Pieces are registered by their layouts, which must then be as exact as the poses
-        // allow: markers measured as means of points placed by poses of three or four markers lie
-        // up to a millimetre off (a ring's two pieces sharing five markers put two of them beyond
-        // the 0.5 mm of a layout match: random_objects seed 6).
-        for (Body& body : bodies_)
-            if (body.alive)
-                body.refined_mm = refinedMarkers(session, body);
         changed = joinBodies(session);
         for (Body& body : bodies_) {
             if (!body.alive)

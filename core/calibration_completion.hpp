@@ -202,7 +202,7 @@ private:
         /// a piece of the same body, which holds them as markers, may register onto this one.
         std::vector<Vec3> glimpsed_mm;
         /// Its markers refined by least squares over its poses (refine(), the body left as it
-        /// is) before the join: the layout by which pieces are registered on each other.
+        /// is), set by joinBodies(): the layout by which pieces are registered on each other.
         std::vector<Vec3> refined_mm;
         /// Per marker: frames of the last refine() in which it was found with three others.
         std::vector<std::uint32_t> framesInFour;

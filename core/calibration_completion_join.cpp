@@ -138,6 +138,13 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     const std::vector<MarkerModel>& models = roundModels_;
     if (models.size() != alive)
         return false;
+    // Pieces are registered by their layouts, which must then be as exact as the poses allow:
+    // markers measured as means of points placed by poses of three or four markers lie up to a
+    // millimetre off (a ring's two pieces sharing five markers put two of them beyond the 0.5 mm
+    // of a layout match: random_objects seed 6).
+    for (Body& body : bodies_)
+        if (body.alive)
+            body.refined_mm = refinedMarkers(session, body);
     std::vector<char> trackedAlone(alive, 0);
     auto trackAlone = [&](std::size_t b) {
         if (trackedAlone[b])
