@@ -619,6 +619,20 @@ int main(int argc, char** argv) {
                 }
             std::printf("  model %zu holds of object %zu (RMS %.3f mm):%s\n", i, k, a.rms_mm,
                         held.c_str());
+            // Two model markers on one true marker: how far apart, and each from the truth.
+            const auto& pm = models[i].markers_model_mm;
+            for (std::size_t x = 0; x < pm.size(); ++x)
+                for (std::size_t y = x + 1; y < pm.size(); ++y) {
+                    const int m = a.layoutMarkerOf[x];
+                    if (m < 0 || a.layoutMarkerOf[y] != m)
+                        continue;
+                    const Vec3& truth = layouts[k][static_cast<std::size_t>(m)];
+                    std::printf("    duplicate of true marker %d: model markers %zu and %zu, "
+                                "%.2f mm apart, %.2f and %.2f mm from the truth\n",
+                                m, x, y, (pm[x] - pm[y]).norm(),
+                                (a.T_layout_from_model.apply(pm[x]) - truth).norm(),
+                                (a.T_layout_from_model.apply(pm[y]) - truth).norm());
+                }
         }
         for (std::size_t i = 0; i < count; ++i)
             for (std::size_t j = 0; j < count; ++j) {
