@@ -37,6 +37,8 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
     counters_ = {};
     bodies_.clear();
     nextBodyId_ = 0;
+    sminLayoutOf_.clear();
+    sminLargest_.clear();
     const std::size_t frames = session.frames();
     if (!valid_ || frames < 2)
         return 0;
@@ -161,7 +163,33 @@ void CalibrationCompletion::markersOfOthersAt(std::size_t f, const Body& body, O
 // ---------------------------------------------------------------------------------------------
 // Tracking every body through the session
 
-std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count) const {
+namespace {
+
+/// S_min's pairs kept by body id across the rounds.
+class SminPairsById final : public SminPairMemory {
+public:
+    SminPairsById(std::span<const std::uint32_t> ids,
+                  std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t>& largest)
+        : ids_(ids)
+        , largest_(largest) {}
+    std::optional<std::size_t> recall(std::size_t a, std::size_t b) const override {
+        const auto it = largest_.find({ids_[a], ids_[b]});
+        if (it == largest_.end())
+            return std::nullopt;
+        return it->second;
+    }
+    void remember(std::size_t a, std::size_t b, std::size_t largest) override {
+        largest_[{ids_[a], ids_[b]}] = largest;
+    }
+
+private:
+    std::span<const std::uint32_t> ids_;
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t>& largest_;
+};
+
+} // namespace
+
+std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count) {
     std::vector<MarkerModel> models;
     models.reserve(count);
     for (std::size_t b = 0; b < count; ++b) {
@@ -186,7 +214,23 @@ std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count
     // markers to be told from itself at the tracker's tolerance than at the export's safe one.
     SminConfig smin = config_.smin;
     smin.tolerance_mm = std::min(smin.tolerance_mm, config_.tracking.distanceTolerance_mm);
-    computeSmin(models, smin);
+    // A body whose layout changed forgets its pairs.
+    std::vector<std::uint32_t> ids(count);
+    for (std::size_t b = 0; b < count; ++b) {
+        const std::uint32_t id = ids[b] = bodies_[b].id;
+        auto known = sminLayoutOf_.find(id);
+        if (known != sminLayoutOf_.end() && sameLayout(known->second, models[b]))
+            continue;
+        if (known == sminLayoutOf_.end())
+            known = sminLayoutOf_.emplace(id, MarkerModel(config_.maxMarkersPerModel)).first;
+        known->second.assign(models[b]);
+        std::erase_if(sminLargest_, [&](const auto& pair) {
+            return pair.first.first == id || pair.first.second == id;
+        });
+    }
+    SminWorkspace workspace;
+    SminPairsById memory(ids, sminLargest_);
+    computeSmin(models, smin, workspace, &memory);
     // A layout that is nearly the same seen from several sides (a sphere) may need more markers
     // to be told from itself than are ever in view at once. The session does not need that
     // certainty: of all hypotheses the tracker takes the best (most markers, then least residual),

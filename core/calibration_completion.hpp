@@ -4,8 +4,10 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "core/marker_model.hpp"
@@ -223,7 +225,7 @@ private:
 
     /// \brief Models of the bodies [0, count) for the tracker: their markers, co-visibility (or
     /// every pair while none is known) and S_min as completion tracks.
-    std::vector<MarkerModel> trackingModels(std::size_t count) const;
+    std::vector<MarkerModel> trackingModels(std::size_t count);
     /// Where one tracked model's poses go: per session frame, whether it was found and its pose.
     struct PoseTrack {
         std::vector<std::uint8_t>* posed;
@@ -311,6 +313,12 @@ private:
     /// The alive bodies' models as trackAll() last tracked them (bodies_ order).
     std::vector<MarkerModel> roundModels_;
     std::uint32_t nextBodyId_ = 0;
+    /// S_min of earlier rounds: each body's tracking model as S_min last saw it (by body id), and
+    /// the largest congruence of one onto another (by the two ids). A body whose model stands
+    /// keeps its pairs; S_min, computed for every pair of bodies, is most of a round's cost
+    /// after the tracking.
+    std::map<std::uint32_t, MarkerModel> sminLayoutOf_;
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> sminLargest_;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
     /// The place radius of the body being measured (mm).

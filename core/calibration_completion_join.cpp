@@ -96,24 +96,9 @@ std::optional<RigidTransform> placeOnGlimpses(std::span<const Vec3> part, const 
     return placed;
 }
 
-/// A marker that moved less than this (mm) since a body was tracked alone leaves its lone poses
-/// standing: the tracker matches within 1.5 mm, and measure() moves markers by hundredths of a
-/// millimetre from round to round.
-constexpr double kSameMarker_mm = 0.1;
-
-/// Whether \a a and \a b track alike: markers in the same order within kSameMarker_mm, the same
-/// edges and S_min.
+/// Whether \a a and \a b track alike: one layout (sameLayout), with the same S_min.
 bool tracksAlike(const MarkerModel& a, const MarkerModel& b) {
-    const auto sameMarker = [](const Vec3& x, const Vec3& y) {
-        return (x - y).squaredNorm() <= kSameMarker_mm * kSameMarker_mm;
-    };
-    const auto sameEdge = [](const ModelEdge& x, const ModelEdge& y) {
-        return x.from == y.from && x.to == y.to;
-    };
-    return a.sMin == b.sMin && a.sameShapeAs == b.sameShapeAs &&
-           std::equal(a.markers_model_mm.begin(), a.markers_model_mm.end(),
-                      b.markers_model_mm.begin(), b.markers_model_mm.end(), sameMarker) &&
-           std::equal(a.edges.begin(), a.edges.end(), b.edges.begin(), b.edges.end(), sameEdge);
+    return a.sMin == b.sMin && a.sameShapeAs == b.sameShapeAs && sameLayout(a, b);
 }
 
 } // namespace

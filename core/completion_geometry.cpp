@@ -222,6 +222,18 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
     return fit->transform;
 }
 
+bool sameLayout(const MarkerModel& a, const MarkerModel& b) {
+    const auto sameMarker = [](const Vec3& x, const Vec3& y) {
+        return (x - y).squaredNorm() <= kSameMarker_mm * kSameMarker_mm;
+    };
+    const auto sameEdge = [](const ModelEdge& x, const ModelEdge& y) {
+        return x.from == y.from && x.to == y.to;
+    };
+    return std::equal(a.markers_model_mm.begin(), a.markers_model_mm.end(),
+                      b.markers_model_mm.begin(), b.markers_model_mm.end(), sameMarker) &&
+           std::equal(a.edges.begin(), a.edges.end(), b.edges.begin(), b.edges.end(), sameEdge);
+}
+
 void appendTriangles(std::span<const Vec3> layout, std::size_t body,
                      std::vector<SortedTriangle>& out) {
     const auto n = static_cast<std::uint32_t>(layout.size());

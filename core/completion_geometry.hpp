@@ -9,6 +9,7 @@
 #include <span>
 #include <vector>
 
+#include "core/marker_model.hpp"
 #include "core/rigid_transform.hpp"
 
 namespace edgetrack::completion_detail {
@@ -77,6 +78,16 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
 std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
                                                  std::span<const Vec3> whole, double tolerance_mm,
                                                  double uniqueness_mm, std::size_t budget);
+
+/// A marker that moved less than this (mm) since a body was tracked alone, or since its S_min
+/// pairs were found, leaves them standing: the tracker matches within 1.5 mm, S_min counts markers
+/// within a millimetre or more, and measure() moves markers by hundredths of a millimetre from
+/// round to round.
+constexpr double kSameMarker_mm = 0.1;
+
+/// Whether \a a and \a b are one layout: markers in the same order within kSameMarker_mm, and
+/// the same edges.
+bool sameLayout(const MarkerModel& a, const MarkerModel& b);
 
 /// Three markers or points, their corners ordered by the side facing each, shortest first (mm):
 /// two congruent scalene triangles list their corresponding corners in the same order.

@@ -278,8 +278,8 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {
     computeSmin(models, config, workspace);
 }
 
-void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
-                 SminWorkspace& workspace) {
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWorkspace& workspace,
+                 SminPairMemory* memory) {
     // Largest ambiguous set per model, kept in sMin until the end.
     for (MarkerModel& m : models) {
         m.sMin = 0;
@@ -291,13 +291,22 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
     // which copy sameShapeAs names when a model has several: for a model, the last pair with a
     // copy in it is the same in this order as in the order of a first.
     for (std::size_t b = 0; b < models.size(); ++b) {
-        buildAdjacency(models[b], adjB);
-        sortPairs(models[b], adjB, pairsB);
+        bool bReady = false;
         for (std::size_t a = 0; a <= b; ++a) {
-            buildAdjacency(models[a], adjA);
             const bool self = a == b;
-            const std::size_t l =
-                largestCongruence(models[a], adjA, models[b], adjB, pairsB, self, config);
+            std::optional<std::size_t> known = memory ? memory->recall(a, b) : std::nullopt;
+            if (!known) {
+                if (!bReady) {
+                    buildAdjacency(models[b], adjB);
+                    sortPairs(models[b], adjB, pairsB);
+                    bReady = true;
+                }
+                buildAdjacency(models[a], adjA);
+                known = largestCongruence(models[a], adjA, models[b], adjB, pairsB, self, config);
+                if (memory)
+                    memory->remember(a, b, *known);
+            }
+            const std::size_t l = *known;
             const double smaller = static_cast<double>(
                 std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size()));
             if (!self && static_cast<double>(l) >= config.sameShapeShare * smaller) {

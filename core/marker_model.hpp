@@ -4,6 +4,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -64,6 +65,8 @@ struct SminConfig {
     bool operator==(const SminConfig&) const = default;
 };
 
+class SminPairMemory;
+
 /**
  * \brief Working storage of computeSmin: every co-visible pair of one model, sorted by length.
  * Sized once for models of up to \a maxMarkers markers; a computeSmin given one allocates nothing
@@ -83,8 +86,24 @@ public:
 
 private:
     friend void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
-                            SminWorkspace& workspace);
+                            SminWorkspace& workspace, SminPairMemory* memory);
     PairList pairs_;
+};
+
+/**
+ * \brief What computeSmin found for pairs of models before, for a caller that runs it again on
+ * models most of which have not changed (calibration completion, once a round).
+ *
+ * The largest congruence of model \a a onto model \a b (indices into the models of the call,
+ * \a a <= \a b) depends on those two models alone.
+ */
+class SminPairMemory {
+public:
+    virtual ~SminPairMemory() = default;
+    /// The largest congruence of \a a onto \a b, if known.
+    virtual std::optional<std::size_t> recall(std::size_t a, std::size_t b) const = 0;
+    /// Told each largest congruence computeSmin had to find.
+    virtual void remember(std::size_t a, std::size_t b, std::size_t largest) = 0;
 };
 
 /**
@@ -98,10 +117,13 @@ private:
  * almost entirely are copies of one layout (two identical cubes): they are marked as the same
  * shape and left out of each other's S_min, since no number of markers tells them apart.
  *
- * Runs once at the end of a calibration; its cost grows with the triangles of each model times
- * the congruent pairs of the other, which are found by a binary search in \a workspace.
+ * Runs at the end of a calibration, and once a round in its completion; its cost grows with the
+ * triangles of each model times the congruent pairs of the other, which are found by a binary
+ * search in \a workspace. A pair \a memory recalls is not searched again; each one searched is
+ * told to it.
  */
-void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWorkspace& workspace);
+void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWorkspace& workspace,
+                 SminPairMemory* memory = nullptr);
 
 /// \brief computeSmin with a workspace of its own (allocated for the call).
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config);

@@ -1,6 +1,9 @@
 // Tests of marker models: canonical frames and S_min from congruences.
 #include <cmath>
+#include <map>
+#include <optional>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -109,6 +112,65 @@ TEST(Smin, IdenticalModelsAreMarkedAsTheSameShape) {
     computeSmin(pair, SminConfig{});
     EXPECT_EQ(models[0].sMin, pair[0].sMin);
     EXPECT_EQ(models[1].sMin, pair[0].sMin);
+}
+
+/// Keeps every pair computeSmin finds, and counts what it was told and asked.
+class PairsKept final : public SminPairMemory {
+public:
+    std::optional<std::size_t> recall(std::size_t a, std::size_t b) const override {
+        ++recalls;
+        const auto it = largest.find({a, b});
+        return it == largest.end() ? std::nullopt : std::optional<std::size_t>(it->second);
+    }
+    void remember(std::size_t a, std::size_t b, std::size_t l) override {
+        largest[{a, b}] = l;
+        ++remembered;
+    }
+    std::map<std::pair<std::size_t, std::size_t>, std::size_t> largest;
+    mutable std::size_t recalls = 0;
+    std::size_t remembered = 0;
+};
+
+TEST(Smin, PairsRememberedFromAnEarlierRunGiveTheSameResult) {
+    // A symmetric square with two more markers (S_min 5), a copy of an irregular layout and the
+    // layout itself (the same shape), and another irregular one.
+    const std::vector<Vec3> square{{30, 0, 0},  {0, 30, 0},  {-30, 0, 0},
+                                   {0, -30, 0}, {12, 5, 35}, {-20, 14, 52}};
+    const std::vector<Vec3> irregular = irregularLayout(9, 11);
+    auto fresh = [&] {
+        std::vector<MarkerModel> models;
+        models.push_back(fullyConnected(square));
+        models.push_back(fullyConnected(irregular));
+        models.push_back(fullyConnected(irregular));
+        models.push_back(fullyConnected(irregularLayout(9, 12)));
+        return models;
+    };
+    std::vector<MarkerModel> plain = fresh();
+    computeSmin(plain, SminConfig{});
+
+    SminWorkspace workspace;
+    PairsKept kept;
+    std::vector<MarkerModel> first = fresh();
+    computeSmin(first, SminConfig{}, workspace, &kept);
+    EXPECT_EQ(kept.remembered, 10u); // every pair a <= b of four models
+    std::vector<MarkerModel> again = fresh();
+    computeSmin(again, SminConfig{}, workspace, &kept);
+    EXPECT_EQ(kept.remembered, 10u); // nothing computed again
+    EXPECT_EQ(kept.recalls, 20u);
+    for (std::size_t m = 0; m < plain.size(); ++m)
+        for (const std::vector<MarkerModel>* run : {&first, &again}) {
+            EXPECT_EQ((*run)[m].sMin, plain[m].sMin) << "model " << m;
+            EXPECT_EQ((*run)[m].sameShapeAs, plain[m].sameShapeAs) << "model " << m;
+        }
+    EXPECT_EQ(plain[0].sMin, 5u);
+    EXPECT_EQ(plain[1].sameShapeAs, 2);
+
+    // What the memory says is what S_min takes: a pair remembered as congruent on all six
+    // markers makes the first model need all of them.
+    kept.largest[{0, 0}] = 6;
+    std::vector<MarkerModel> told = fresh();
+    computeSmin(told, SminConfig{}, workspace, &kept);
+    EXPECT_EQ(told[0].sMin, 6u);
 }
 
 TEST(MarkerModel, AssignRefusesWhatDoesNotFit) {
