@@ -478,16 +478,9 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
     }
 
     // Two candidates of one marker V (p's possible identity) agree when they are different
-    // points and markers, co-visible, and as far apart as their markers.
+    // points and markers, co-visible, and as far apart as their markers (below).
     const float* modelDistance = &models_.distance_mm[slot.firstDistance];
     const auto toleranceF = static_cast<float>(tolerance);
-    auto agree = [&](const Candidate& x, const Candidate& y) {
-        ++frameChecks_;
-        return x.point != y.point && x.marker != y.marker &&
-               adjacency(body, x.marker).contains(y.marker) &&
-               std::abs(frame_.distance_mm[x.point * frame_.count + y.point] -
-                        modelDistance[x.marker * slot.markerCount + y.marker]) <= toleranceF;
-    };
 
     // A body found with m markers, p among them as marker v, shows m - 1 candidates of v that
     // agree pairwise (markers seen together are co-visible; their distances match). So only
@@ -501,14 +494,27 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
         if (!budgetLeft())
             return;
         const Candidate* list = &frame_.candidates[v * perMarker];
+        std::uint64_t* agreement = match_.agreement.data();
         for (std::size_t a = 0; a < count; ++a)
-            match_.agreement[a] = 0;
-        for (std::size_t a = 0; a < count; ++a)
-            for (std::size_t b = a + 1; b < count; ++b)
-                if (agree(list[a], list[b])) {
-                    match_.agreement[a] |= std::uint64_t{1} << b;
-                    match_.agreement[b] |= std::uint64_t{1} << a;
+            agreement[a] = 0;
+        // The row of a is gathered in a register: this pair walk is most of a search's time.
+        for (std::size_t a = 0; a < count; ++a) {
+            const Candidate x = list[a];
+            const MarkerSet& coVisible = adjacency(body, x.marker);
+            const float* frameRow = &frame_.distance_mm[x.point * frame_.count];
+            const float* modelRow = &modelDistance[x.marker * slot.markerCount];
+            std::uint64_t row = agreement[a];
+            for (std::size_t b = a + 1; b < count; ++b) {
+                const Candidate y = list[b];
+                if (y.point != x.point && y.marker != x.marker && coVisible.contains(y.marker) &&
+                    std::abs(frameRow[y.point] - modelRow[y.marker]) <= toleranceF) {
+                    row |= std::uint64_t{1} << b;
+                    agreement[b] |= std::uint64_t{1} << a;
                 }
+            }
+            agreement[a] = row;
+        }
+        frameChecks_ += count * (count - 1) / 2;
         std::uint64_t alive = count == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << count) - 1;
         for (bool pruned = true; pruned;) {
             pruned = false;
