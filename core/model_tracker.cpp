@@ -504,13 +504,14 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
             const float* frameRow = &frame_.distance_mm[x.point * frame_.count];
             const float* modelRow = &modelDistance[x.marker * slot.markerCount];
             std::uint64_t row = agreement[a];
+            // Without branches: whether a pair agrees is as good as random to a predictor.
             for (std::size_t b = a + 1; b < count; ++b) {
                 const Candidate y = list[b];
-                if (y.point != x.point && y.marker != x.marker && coVisible.contains(y.marker) &&
-                    std::abs(frameRow[y.point] - modelRow[y.marker]) <= toleranceF) {
-                    row |= std::uint64_t{1} << b;
-                    agreement[b] |= std::uint64_t{1} << a;
-                }
+                const bool agrees =
+                    (y.point != x.point) & (y.marker != x.marker) & coVisible.contains(y.marker) &
+                    (std::abs(frameRow[y.point] - modelRow[y.marker]) <= toleranceF);
+                row |= std::uint64_t{agrees} << b;
+                agreement[b] |= std::uint64_t{agrees} << a;
             }
             agreement[a] = row;
         }
