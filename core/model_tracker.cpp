@@ -507,11 +507,12 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
             // Without branches: whether a pair agrees is as good as random to a predictor.
             for (std::size_t b = a + 1; b < count; ++b) {
                 const Candidate y = list[b];
-                const bool agrees =
-                    (y.point != x.point) & (y.marker != x.marker) & coVisible.contains(y.marker) &
-                    (std::abs(frameRow[y.point] - modelRow[y.marker]) <= toleranceF);
-                row |= std::uint64_t{agrees} << b;
-                agreement[b] |= std::uint64_t{agrees} << a;
+                const std::uint64_t agrees =
+                    std::uint64_t{y.point != x.point} & std::uint64_t{y.marker != x.marker} &
+                    std::uint64_t{coVisible.contains(y.marker)} &
+                    std::uint64_t{std::abs(frameRow[y.point] - modelRow[y.marker]) <= toleranceF};
+                row |= agrees << b;
+                agreement[b] |= agrees << a;
             }
             agreement[a] = row;
         }
