@@ -317,6 +317,12 @@ std::size_t ObjectCalibrator::objectViews(std::span<CalibrationObjectView> out) 
 }
 
 std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
+    const std::size_t count = exportLayouts(out);
+    computeSmin(out.first(count), config_.smin, sminWorkspace_);
+    return count;
+}
+
+std::size_t ObjectCalibrator::exportLayouts(std::span<MarkerModel> out) const {
     std::size_t count = 0;
     FixedVector<std::size_t, MarkerSet::kCapacity> chosen;
     FixedVector<Vec3, MarkerSet::kCapacity> layout;
@@ -373,7 +379,6 @@ std::size_t ObjectCalibrator::exportModels(std::span<MarkerModel> out) const {
             }
         ++count;
     }
-    computeSmin(out.first(count), config_.smin, sminWorkspace_);
     return count;
 }
 

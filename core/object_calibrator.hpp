@@ -136,6 +136,15 @@ public:
      */
     std::size_t exportModels(std::span<MarkerModel> out) const;
 
+    /**
+     * \brief The models as exportModels gives them but without S_min (each keeps sMin 4): the
+     * layouts and edges alone, for watching a session's progress. S_min is most of an export's
+     * cost (a 38-marker model's takes tens of milliseconds); only tracking needs it.
+     * \param out models to fill, each sized for maxMarkersPerObject markers.
+     * \return how many models were written (at most out.size()).
+     */
+    std::size_t exportLayouts(std::span<MarkerModel> out) const;
+
     /// \brief The objects now, for a progress display.
     std::size_t objectViews(std::span<CalibrationObjectView> out) const;
     std::size_t objectCount() const;

@@ -419,7 +419,7 @@ int main(int argc, char** argv) {
                                 [static_cast<std::size_t>(m.marker)];
             }
         if ((f + 1) % perSecond == 0) {
-            const std::size_t count = calibrator.exportModels(models);
+            const std::size_t count = calibrator.exportLayouts(models);
             if (verbose) {
                 std::vector<CalibrationObjectView> views(config.maxObjects);
                 const std::size_t n = calibrator.objectViews(views);

@@ -211,6 +211,28 @@ TEST_F(TwoBodies, NoHeapAllocationPerFrameAfterWarmUp) {
     std::size_t exported = 0;
     EXPECT_EQ(test::countAllocations([&] { exported = calibrator.exportModels(models); }), 0u);
     EXPECT_EQ(exported, 2u);
+
+    // The layouts alone (a progress view's export): the same markers and edges, S_min not
+    // computed, and no allocation either.
+    std::vector<MarkerModel> layoutsOnly;
+    for (std::size_t i = 0; i < config.maxObjects; ++i)
+        layoutsOnly.emplace_back(config.maxMarkersPerObject);
+    std::size_t exportedLayouts = 0;
+    EXPECT_EQ(
+        test::countAllocations([&] { exportedLayouts = calibrator.exportLayouts(layoutsOnly); }),
+        0u);
+    ASSERT_EQ(exportedLayouts, exported);
+    for (std::size_t m = 0; m < exported; ++m) {
+        EXPECT_EQ(layoutsOnly[m].sMin, 4u);
+        ASSERT_EQ(layoutsOnly[m].markers_model_mm.size(), models[m].markers_model_mm.size());
+        for (std::size_t k = 0; k < models[m].markers_model_mm.size(); ++k)
+            EXPECT_EQ(layoutsOnly[m].markers_model_mm[k], models[m].markers_model_mm[k]);
+        ASSERT_EQ(layoutsOnly[m].edges.size(), models[m].edges.size());
+        for (std::size_t e = 0; e < models[m].edges.size(); ++e) {
+            EXPECT_EQ(layoutsOnly[m].edges[e].from, models[m].edges[e].from);
+            EXPECT_EQ(layoutsOnly[m].edges[e].to, models[m].edges[e].to);
+        }
+    }
 }
 
 TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
