@@ -272,10 +272,10 @@ StereoRig rigOf(const StereoRig& start, const Unknowns& u) {
 std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
                           std::span<const Ordered> used, const RigCalibrationConfig& config,
                           bool fixRig, Unknowns& u) {
-    ceres::Problem problem;
     std::array<std::array<double, 5>, 2> distortion{start.camera(0).intrinsics().distortion,
                                                     start.camera(1).intrinsics().distortion};
-    for (std::size_t f = 0; f < used.size(); ++f) {
+    // Frame pair f's reprojections: its wand pose, through both cameras.
+    const auto addFramePair = [&](ceres::Problem& problem, std::size_t f) {
         for (std::size_t k = 0; k < wand.markerCount; ++k) {
             const double offset = wand.offset_mm(k);
             auto* loss0 = new ceres::HuberLoss(config.robustLoss_px);
@@ -293,14 +293,44 @@ std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
         problem.SetManifold(
             u.wand[f].data(),
             new ceres::ProductManifold<ceres::EuclideanManifold<3>, ceres::SphereManifold<3>>());
+    };
+    ceres::Solver::Options options;
+    options.max_num_iterations = 100;
+    options.function_tolerance = 1e-12;
+    options.gradient_tolerance = 1e-14;
+    options.parameter_tolerance = 1e-12;
+    options.logging_type = ceres::SILENT;
+    options.minimizer_progress_to_stdout = false;
+
+    if (fixRig) {
+        // With the rig held, no unknown links two frame pairs: each wand pose is a problem of
+        // its own and stops when it has converged. Solved as one problem, every pose waited for
+        // the slowest: a rig that fits badly took the 100 iterations on all of them (a second
+        // and a half of a board's two-second check, most of it for poses long settled).
+        options.linear_solver_type = ceres::DENSE_QR;
+        std::size_t slowest = 0;
+        for (std::size_t f = 0; f < used.size(); ++f) {
+            ceres::Problem problem;
+            addFramePair(problem, f);
+            problem.SetParameterBlockConstant(u.intrinsics[0].data());
+            problem.SetParameterBlockConstant(u.intrinsics[1].data());
+            problem.SetParameterBlockConstant(u.angleAxis.data());
+            problem.SetParameterBlockConstant(u.translation.data());
+            ceres::Solver::Summary summary;
+            ceres::Solve(options, &problem, &summary);
+            if (!summary.IsSolutionUsable())
+                return std::nullopt;
+            slowest = std::max(slowest, summary.iterations.size());
+        }
+        return static_cast<int>(slowest);
     }
-    if (!config.refineIntrinsics || fixRig) {
+
+    ceres::Problem problem;
+    for (std::size_t f = 0; f < used.size(); ++f)
+        addFramePair(problem, f);
+    if (!config.refineIntrinsics) {
         problem.SetParameterBlockConstant(u.intrinsics[0].data());
         problem.SetParameterBlockConstant(u.intrinsics[1].data());
-    }
-    if (fixRig) {
-        problem.SetParameterBlockConstant(u.angleAxis.data());
-        problem.SetParameterBlockConstant(u.translation.data());
     }
 
     // Wand poses first: the Schur complement leaves only the cameras' few unknowns.
@@ -311,16 +341,8 @@ std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
     ordering->AddElementToGroup(u.translation.data(), 1);
     ordering->AddElementToGroup(u.intrinsics[0].data(), 1);
     ordering->AddElementToGroup(u.intrinsics[1].data(), 1);
-
-    ceres::Solver::Options options;
     options.linear_solver_type = ceres::DENSE_SCHUR;
     options.linear_solver_ordering.reset(ordering);
-    options.max_num_iterations = 100;
-    options.function_tolerance = 1e-12;
-    options.gradient_tolerance = 1e-14;
-    options.parameter_tolerance = 1e-12;
-    options.logging_type = ceres::SILENT;
-    options.minimizer_progress_to_stdout = false;
     ceres::Solver::Summary summary;
     ceres::Solve(options, &problem, &summary);
     if (!summary.IsSolutionUsable())

@@ -65,6 +65,8 @@ struct RigCalibrationReport {
     /// Camera 1's pose change from the starting rig: rotation (degrees) and position (mm).
     double rotationChange_deg = 0.0;
     double positionChange_mm = 0.0;
+    /// Solver iterations over both adjustments (an assessment, whose wand poses are solved one
+    /// by one, counts its slowest pose's).
     int solverIterations = 0;
     /// Human-readable warnings: poor coverage, poor agreement.
     std::vector<std::string> warnings;
