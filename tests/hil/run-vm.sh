@@ -41,6 +41,10 @@ done
 [ -n "$kernel_version" ] || skip "no readable /boot/vmlinuz-* with modules (linux-image-amd64)"
 
 mkdir -p "$work_dir"
+# Tests run two at a time: the first prepares the modules and the initramfs, the other waits
+# for it here (the lock goes with this script's exit too).
+exec 9> "$work_dir/prepare.lock"
+flock 9
 modules_dir=$work_dir/modules-$kernel_version
 status=0
 "$here/build-modules.sh" "$kernel_version" "$modules_dir" || status=$?
@@ -65,6 +69,7 @@ if [ ! -f "$initramfs" ] || [ "$(cat "$initramfs.stamp" 2>/dev/null)" != "$initr
     rm -rf "$tree"
     echo "$initramfs_stamp" > "$initramfs.stamp"
 fi
+flock -u 9
 
 results=$(mktemp -d "$work_dir/results.XXXXXX")
 trap 'rm -rf "$results"' EXIT
