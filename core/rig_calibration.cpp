@@ -307,9 +307,12 @@ std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
         // its own and stops when it has converged. Solved as one problem, every pose waited for
         // the slowest: a rig that fits badly took the 100 iterations on all of them (a second
         // and a half of a board's two-second check, most of it for poses long settled).
+        // A pose whose steps keep leaving the cameras' view (the solver gives up) keeps its seed,
+        // and the refusal of pairs that fit badly judges it as any other.
         options.linear_solver_type = ceres::DENSE_QR;
-        std::size_t slowest = 0;
+        std::size_t slowest = 0, solved = 0;
         for (std::size_t f = 0; f < used.size(); ++f) {
+            const std::array<double, 6> seed = u.wand[f];
             ceres::Problem problem;
             addFramePair(problem, f);
             problem.SetParameterBlockConstant(u.intrinsics[0].data());
@@ -318,10 +321,15 @@ std::optional<int> adjust(const StereoRig& start, const WandSpec& wand,
             problem.SetParameterBlockConstant(u.translation.data());
             ceres::Solver::Summary summary;
             ceres::Solve(options, &problem, &summary);
-            if (!summary.IsSolutionUsable())
-                return std::nullopt;
+            if (!summary.IsSolutionUsable()) {
+                u.wand[f] = seed;
+                continue;
+            }
+            ++solved;
             slowest = std::max(slowest, summary.iterations.size());
         }
+        if (solved == 0)
+            return std::nullopt;
         return static_cast<int>(slowest);
     }
 
