@@ -139,7 +139,7 @@ public:
     /**
      * \brief The models as exportModels gives them but without S_min (each keeps sMin 4): the
      * layouts and edges alone, for watching a session's progress. S_min is most of an export's
-     * cost (a 38-marker model's takes tens of milliseconds); only tracking needs it.
+     * cost (a toy car's 38-marker model's, about 90 ms on the host); only tracking needs it.
      * \param out models to fill, each sized for maxMarkersPerObject markers.
      * \return how many models were written (at most out.size()).
      */
