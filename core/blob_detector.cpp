@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -153,11 +154,13 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     candidates_ = BoundedVector<Candidate>(3 * config.maxLabels);
     notRound_ = BoundedVector<std::uint32_t>(config.maxLabels);
     maybeMerged_ = BoundedVector<std::uint32_t>(config.maxLabels);
+    refused_ = BoundedVector<Blob>(config.maxBlobs);
     constexpr auto kSplitPixels = static_cast<std::size_t>(kSplitSide * kSplitSide);
     splitMask_ = std::make_unique<std::uint8_t[]>(kSplitPixels);
     splitDistance_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
     splitStack_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
     splitEdge_ = std::make_unique<Vec2[]>(kSplitPixels);
+    lineResidual_ = std::make_unique<float[]>(kLinePoints);
     labels_ = DisjointSets(config.maxLabels);
     // At most one run per two pixels of a row.
     const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
@@ -253,6 +256,7 @@ void BlobDetector::detect(const std::uint8_t* pixels, int stride_bytes,
                           BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     out.clear();
     ++counters_.images;
+    traced_ = {}; // the image may be new at the same address
     if (!valid_)
         return;
     labels_.reset(0);
@@ -388,6 +392,7 @@ bool BlobDetector::addCandidate(const Blob& blob, std::uint32_t order) {
 void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
                              BoundedVectorView<Blob>& out, std::span<const Vec2> expected_px) {
     candidates_.clear();
+    refused_.clear();
     notRound_.clear();
     maybeMerged_.clear();
     for (std::size_t label = 0; label < labels_.size(); ++label) {
@@ -438,8 +443,10 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const Moments& m = moments_[label];
         if (!worthSplitting(m))
             continue;
-        if (!splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride))
+        if (!splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride)) {
             ++counters_.splitRefused;
+            refused_.push_back(roundBlob(m));
+        }
     }
     // Two discs far over each other pass the roundness tests; their outline is still two arcs.
     // Such a blob stays one blob unless two discs fit it.
@@ -511,19 +518,25 @@ Blob BlobDetector::roundBlob(const Moments& m) {
     return blob;
 }
 
-bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
-                                  std::uint32_t order, std::size_t minParts) {
-    // The blob on a grid of its bounding box with a frame of one pixel: a cut disc at the image's
-    // border is no disc to fit.
-    const int w = m.right - m.left + 1, h = m.bottom - m.top + 1;
-    if (w + 2 > kSplitSide || h + 2 > kSplitSide || m.left == 0 || m.top == 0 ||
-        m.right == width_ - 1 || m.bottom == height_ - 1)
-        return false;
+bool BlobDetector::restsOnArc(double rms_px, double radius_px, std::size_t points,
+                              const Vec2& resultant) {
+    const double share = resultant.norm() / static_cast<double>(std::max<std::size_t>(points, 1));
+    const bool covered = share < 0.7 || (share < kShortArcShare && rms_px <= kShortArcFitRms_px);
+    return points >= 8 && covered && rms_px <= kSplitFitRms_px && radius_px >= 1.0;
+}
+
+std::size_t BlobDetector::traceOutline(int left, int top, int right, int bottom, int seedX,
+                                       int seedY, const std::uint8_t* pixels, int stride_bytes) {
+    const int w = right - left + 1, h = bottom - top + 1;
+    if (w + 2 > kSplitSide || h + 2 > kSplitSide || left <= 0 || top <= 0 || right >= width_ - 1 ||
+        bottom >= height_ - 1 || seedX < left || seedX > right || seedY < top || seedY > bottom)
+        return 0;
+    traced_ = {pixels, left, top, right, bottom, seedX, seedY};
     const int gw = w + 2, gh = h + 2;
     const auto cell = [gw](int gx, int gy) { return static_cast<std::size_t>(gy * gw + gx); };
     const auto level = [&](int gx, int gy) {
         return static_cast<int>(
-            pixels[static_cast<std::ptrdiff_t>(m.top - 1 + gy) * stride_bytes + (m.left - 1 + gx)]);
+            pixels[static_cast<std::ptrdiff_t>(top - 1 + gy) * stride_bytes + (left - 1 + gx)]);
     };
     std::uint8_t* mask = splitMask_.get();
     std::fill_n(mask, static_cast<std::size_t>(gw * gh), std::uint8_t{0});
@@ -536,7 +549,7 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
         mask[cell(gx, gy)] = 1;
         splitStack_[stacked++] = static_cast<std::uint16_t>(cell(gx, gy));
     };
-    push(m.seedX - m.left + 1, m.seedY - m.top + 1);
+    push(seedX - left + 1, seedY - top + 1);
     while (stacked > 0) {
         const int at = splitStack_[--stacked];
         const int gx = at % gw, gy = at / gw;
@@ -544,6 +557,47 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
             for (int dx = -1; dx <= 1; ++dx)
                 push(gx + dx, gy + dy);
     }
+
+    // Outline points: where the level crosses the threshold between a pixel of the blob and its
+    // outside neighbour, by linear interpolation. The outline of touching discs is arcs of each
+    // disc's own circle, concentric with it whatever the blur and the peak level.
+    Vec2* edge = splitEdge_.get();
+    std::size_t edges = 0;
+    const std::size_t edgeRoom = static_cast<std::size_t>(kSplitSide * kSplitSide);
+    for (int gy = 1; gy <= h; ++gy)
+        for (int gx = 1; gx <= w; ++gx) {
+            if (!mask[cell(gx, gy)])
+                continue;
+            const int inside = level(gx, gy);
+            const int steps[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+            for (const auto& step : steps) {
+                const int ox = gx + step[0], oy = gy + step[1];
+                if (mask[cell(ox, oy)] || edges == edgeRoom)
+                    continue;
+                const int outside = level(ox, oy);
+                const double t = inside > outside ? static_cast<double>(inside - threshold) /
+                                                        static_cast<double>(inside - outside)
+                                                  : 0.5;
+                edge[edges++] = Vec2(gx + t * step[0], gy + t * step[1]);
+            }
+        }
+    tracedEdges_ = edges;
+    return edges;
+}
+
+bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
+                                  std::uint32_t order, std::size_t minParts) {
+    // The blob on a grid of its bounding box with a frame of one pixel: a cut disc at the image's
+    // border is no disc to fit.
+    const std::size_t edges =
+        traceOutline(m.left, m.top, m.right, m.bottom, m.seedX, m.seedY, pixels, stride_bytes);
+    if (edges == 0)
+        return false;
+    const int w = m.right - m.left + 1, h = m.bottom - m.top + 1;
+    const int gw = w + 2, gh = h + 2;
+    const auto cell = [gw](int gx, int gy) { return static_cast<std::size_t>(gy * gw + gx); };
+    std::uint8_t* mask = splitMask_.get();
+    const Vec2* edge = splitEdge_.get();
 
     // Chamfer distance to the outside (3 a step, 4 a diagonal step): a disc's centre is a peak.
     std::uint16_t* distance = splitDistance_.get();
@@ -601,30 +655,6 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     if (discs.empty() || discs.size() > kMaxSplitParts)
         return false;
 
-    // Outline points: where the level crosses the threshold between a pixel of the blob and its
-    // outside neighbour, by linear interpolation. The outline of touching discs is arcs of each
-    // disc's own circle, concentric with it whatever the blur and the peak level.
-    Vec2* edge = splitEdge_.get();
-    std::size_t edges = 0;
-    const std::size_t edgeRoom = static_cast<std::size_t>(kSplitSide * kSplitSide);
-    for (int gy = 1; gy <= h; ++gy)
-        for (int gx = 1; gx <= w; ++gx) {
-            if (!mask[cell(gx, gy)])
-                continue;
-            const int inside = level(gx, gy);
-            const int steps[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
-            for (const auto& step : steps) {
-                const int ox = gx + step[0], oy = gy + step[1];
-                if (mask[cell(ox, oy)] || edges == edgeRoom)
-                    continue;
-                const int outside = level(ox, oy);
-                const double t = inside > outside ? static_cast<double>(inside - threshold) /
-                                                        static_cast<double>(inside - outside)
-                                                  : 0.5;
-                edge[edges++] = Vec2(gx + t * step[0], gy + t * step[1]);
-            }
-        }
-
     // The discs: a circle from each peak of the distance, then from the outline points that no
     // circle explains yet (a smaller disc overlapping a larger one makes a shoulder, no peak).
     // A disc's own points lie near its circle and away from the other discs, whose light adds up
@@ -633,15 +663,9 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
 
-    // A circle rests on its own outline points when they cover at least half of it (their unit
-    // vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83
-    // for a third) and fit it within kSplitFitRms_px, or cover a third of it and fit it within
-    // kShortArcFitRms_px: a disc with neighbours on several sides, or cut by an edge, keeps only
-    // a short arc of its own.
+    // See restsOnArc().
     const auto restsOnItsArc = [](const Circle& c, std::size_t n, const Vec2& resultant) {
-        const double share = resultant.norm() / static_cast<double>(std::max<std::size_t>(n, 1));
-        const bool covered = share < 0.7 || (share < kShortArcShare && c.rms <= kShortArcFitRms_px);
-        return n >= 8 && covered && c.rms <= kSplitFitRms_px && c.radius >= 1.0;
+        return restsOnArc(c.rms, c.radius, n, resultant);
     };
     // A disc of this blob centred by circle \a c (grid coordinates).
     const auto discBlob = [&](const Circle& c) {
@@ -876,6 +900,205 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     }
     ++counters_.splitBlobs;
     counters_.splitParts += parts;
+    return true;
+}
+
+bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
+                                std::span<const DiscOnLine> discs, std::span<Blob> parts) {
+    if (discs.size() < 2 || discs.size() > kMaxLineDiscs || parts.size() < discs.size())
+        return false;
+    // The blob's own pixels grow from its brightest pixel next to its centre.
+    const auto level = [&](int x, int y) {
+        return static_cast<int>(pixels[static_cast<std::ptrdiff_t>(y) * stride_bytes + x]);
+    };
+    int seedX = -1, seedY = -1, seedLevel = config_.threshold - 1;
+    const int cx = static_cast<int>(std::lround(blob.centre_px.x()));
+    const int cy = static_cast<int>(std::lround(blob.centre_px.y()));
+    for (int y = cy - 1; y <= cy + 1; ++y)
+        for (int x = cx - 1; x <= cx + 1; ++x)
+            if (x >= blob.left && x <= blob.right && y >= blob.top && y <= blob.bottom &&
+                level(x, y) > seedLevel) {
+                seedX = x;
+                seedY = y;
+                seedLevel = level(x, y);
+            }
+    if (seedX < 0)
+        return false;
+    // Tried again with other discs, the same blob keeps its outline.
+    const Traced key{pixels, blob.left, blob.top, blob.right, blob.bottom, seedX, seedY};
+    const std::size_t edges = key == traced_
+                                  ? tracedEdges_
+                                  : traceOutline(blob.left, blob.top, blob.right, blob.bottom,
+                                                 seedX, seedY, pixels, stride_bytes);
+    if (edges < 8 * discs.size())
+        return false;
+    // Grid coordinates, as traceOutline's; a centre on a line is onLine + at * along.
+    const Vec2 origin(blob.left - 1, blob.top - 1);
+    const Vec2* edge = splitEdge_.get();
+    const std::size_t count = discs.size();
+    std::array<Vec2, kMaxLineDiscs> onLine{}, along{};
+    std::array<double, kMaxLineDiscs> at{};
+    std::array<Circle, kMaxLineDiscs> circle{};
+    for (std::size_t k = 0; k < count; ++k) {
+        const double length = discs[k].line.direction.norm();
+        if (!(length > 1e-9) || !(discs[k].radius_px >= 1.0) || !(discs[k].radius_px < kSplitSide))
+            return false;
+        onLine[k] = discs[k].line.point_px - origin;
+        along[k] = discs[k].line.direction / length;
+        const Vec2 start = (discs[k].known ? discs[k].start_px : blob.centre_px) - origin;
+        at[k] = discs[k].fixed ? 0.0 : (start - onLine[k]).dot(along[k]);
+        circle[k].centre = discs[k].fixed ? start : onLine[k] + at[k] * along[k];
+        circle[k].radius = discs[k].radius_px;
+    }
+
+    // Each movable centre's place on its line, first by a scan over the blob's extent: a place is
+    // scored by the outline points' robust residuals (squared, capped at 1 px^2), each point
+    // taking the smallest of this circle's and the others'. Discs of unknown place first, then
+    // each in turn again, so that a guess biased by the disc it hid is set right.
+    const int w = blob.right - blob.left + 1, h = blob.bottom - blob.top + 1;
+    const Vec2 middle = blob.centre_px - origin;
+    const double reach = 0.5 * std::hypot(w, h) + 1.0;
+    const double step = std::max(0.25, 2.0 * reach / (kLineSteps - 1));
+    const std::size_t every = (edges + kLinePoints - 1) / kLinePoints;
+    const std::size_t sampled = (edges + every - 1) / every;
+    float* others = lineResidual_.get();
+    const auto robust = [](double off) { return static_cast<float>(std::min(off * off, 1.0)); };
+    const auto scan = [&](std::size_t k) {
+        for (std::size_t i = 0; i < sampled; ++i) {
+            float smallest = 1.0F;
+            for (std::size_t j = 0; j < count; ++j)
+                if (j != k)
+                    smallest =
+                        std::min(smallest, robust((edge[i * every] - circle[j].centre).norm() -
+                                                  circle[j].radius));
+            others[i] = smallest;
+        }
+        const double first = (middle - onLine[k]).dot(along[k]) - reach;
+        float bestCost = std::numeric_limits<float>::infinity();
+        for (int s = 0; s < kLineSteps; ++s) {
+            const Vec2 centre = onLine[k] + (first + s * step) * along[k];
+            float cost = 0.0F;
+            for (std::size_t i = 0; i < sampled; ++i)
+                cost += std::min(others[i],
+                                 robust((edge[i * every] - centre).norm() - circle[k].radius));
+            if (cost < bestCost) {
+                bestCost = cost;
+                at[k] = first + s * step;
+            }
+        }
+        circle[k].centre = onLine[k] + at[k] * along[k];
+    };
+    for (std::size_t k = 0; k < count; ++k)
+        if (!discs[k].known && !discs[k].fixed)
+            scan(k);
+    for (std::size_t k = 0; k < count; ++k)
+        if (!discs[k].fixed)
+            scan(k);
+
+    // Then each movable circle is fitted (its place on the line and its radius) to its own
+    // points: on it (within 1 px) and outside every other (by more than 1 px). A point is at most
+    // one circle's own; its owner is found once a pass.
+    constexpr std::uint8_t kNoOwner = 0xFF;
+    std::uint8_t* owner = splitMask_.get(); // traceOutline's mask is no longer needed
+    const auto findOwners = [&] {
+        for (std::size_t i = 0; i < edges; ++i) {
+            std::size_t near = 0, nearest = 0;
+            double offNearest = 0.0;
+            for (std::size_t j = 0; j < count; ++j) {
+                const double off = (edge[i] - circle[j].centre).norm() - circle[j].radius;
+                if (off <= 1.0) {
+                    ++near;
+                    nearest = j;
+                    offNearest = off;
+                }
+            }
+            owner[i] =
+                near == 1 && offNearest >= -1.0 ? static_cast<std::uint8_t>(nearest) : kNoOwner;
+        }
+    };
+    // The normal equations of circle k's place and radius over its own points.
+    struct Normal {
+        Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
+        Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
+        double sum2 = 0.0;
+        std::size_t n = 0;
+    };
+    const auto normalOf = [&](std::size_t k) {
+        Normal e;
+        for (std::size_t i = 0; i < edges; ++i) {
+            if (owner[i] != k)
+                continue;
+            const Vec2 d = edge[i] - circle[k].centre;
+            const double length = d.norm();
+            if (length < 1e-9)
+                continue;
+            const Eigen::Vector2d j(-d.dot(along[k]) / length, -1.0);
+            const double off = length - circle[k].radius;
+            e.jtj += j * j.transpose();
+            e.jtr += j * off;
+            e.sum2 += off * off;
+            ++e.n;
+        }
+        // The other camera's size of the disc holds the radius where a short arc would trade it
+        // for the place on the line.
+        e.jtj(1, 1) += kRadiusPrior;
+        e.jtr(1) += kRadiusPrior * (circle[k].radius - discs[k].radius_px);
+        return e;
+    };
+    for (int pass = 0; pass < 6; ++pass) {
+        findOwners();
+        for (std::size_t k = 0; k < count; ++k)
+            for (int iteration = 0; iteration < 3 && !discs[k].fixed; ++iteration) {
+                const Normal e = normalOf(k);
+                if (e.n < 5)
+                    return false;
+                const Eigen::Vector2d change = e.jtj.ldlt().solve(-e.jtr);
+                if (!change.allFinite())
+                    return false;
+                at[k] += change.x();
+                circle[k].radius += change.y();
+                circle[k].centre = onLine[k] + at[k] * along[k];
+                if (change.squaredNorm() < 1e-8)
+                    break;
+            }
+    }
+
+    // Every movable disc rests on an arc of its own, of about the size expected, and together the
+    // discs explain the whole outline: a disc no line was given for is no case for this.
+    std::size_t unexplained = 0;
+    for (std::size_t i = 0; i < edges; ++i) {
+        bool explained = false;
+        for (std::size_t k = 0; k < count && !explained; ++k)
+            explained = (edge[i] - circle[k].centre).norm() <= circle[k].radius + 1.0;
+        unexplained += explained ? 0U : 1U;
+    }
+    if (unexplained * 20 > edges)
+        return false;
+    findOwners();
+    for (std::size_t k = 0; k < count; ++k) {
+        const Normal e = normalOf(k);
+        circle[k].rms = std::sqrt(e.sum2 / static_cast<double>(std::max<std::size_t>(e.n, 1)));
+        if (!discs[k].fixed) {
+            // The standard error of the place on the line, from the points' scatter (no less
+            // than kLineNoise_px) and how the arc's points constrain it.
+            const double spread = std::max(circle[k].rms, kLineNoise_px);
+            const double placeError = spread * std::sqrt(e.jtj.inverse()(0, 0));
+            if (e.n < 5 || circle[k].rms > kSplitFitRms_px || !(placeError <= kLinePlaceError_px) ||
+                circle[k].radius < 0.75 * discs[k].radius_px ||
+                circle[k].radius > 1.33 * discs[k].radius_px)
+                return false;
+        }
+        Blob& part = parts[k];
+        part = blob;
+        part.centre_px = circle[k].centre + origin;
+        part.area_px =
+            static_cast<float>(3.14159265358979323846 * circle[k].radius * circle[k].radius);
+        part.elongation = 1.0F;
+        part.split = true;
+        part.cut = false;
+        part.fitRms_px = static_cast<float>(circle[k].rms);
+    }
+    ++counters_.splitOnLines;
     return true;
 }
 

@@ -1,6 +1,7 @@
 // Blob detection in 8-bit IR frames: NEON threshold scan, run-based connected components, moments.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -60,6 +61,28 @@ struct Blob {
     float fitRms_px = 0.0f;
 };
 
+/// \brief A straight line in raw pixels of one camera: point_px + t * direction, direction a unit
+/// vector. Over the few pixels of a blob, an epipolar line curved by lens distortion is straight.
+struct PixelLine {
+    Vec2 point_px = Vec2::Zero();
+    Vec2 direction = Vec2::UnitX();
+};
+
+/// \brief A disc of a blob for BlobDetector::splitOnLines(): where its centre lies, and its size.
+struct DiscOnLine {
+    /// Its centre lies on this line (raw px).
+    PixelLine line{};
+    /// A first guess of its centre (raw px), when known is set.
+    Vec2 start_px = Vec2::Zero();
+    /// Its expected radius (px).
+    double radius_px = 0.0;
+    /// start_px is a fair guess (a disc the detector split off); else the whole blob is scanned.
+    bool known = true;
+    /// A disc that stays where start_px puts it (no line is known for it): it only explains its
+    /// part of the outline.
+    bool fixed = false;
+};
+
 /// \brief Per-detector counters for the status view (cumulative).
 struct BlobCounters {
     std::uint64_t images = 0;
@@ -71,6 +94,8 @@ struct BlobCounters {
     std::uint64_t splitParts = 0;   ///< discs those gave
     std::uint64_t splitRefused = 0; ///< blobs not round that could not be split with confidence
     std::uint64_t cutDiscs = 0;     ///< discs cut by an edge, centred by their visible arc
+    /// Blobs split again, with one disc more, on the epipolar lines of the other camera's blobs.
+    std::uint64_t splitOnLines = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
 };
@@ -102,6 +127,29 @@ public:
     void detect(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
                 std::span<const Vec2> expected_px = {});
 
+    /**
+     * \brief Split \a blob, one of the last detect()'s, into the discs \a discs describe.
+     *
+     * Two discs far over each other in this image may lie apart in the other camera's: there each
+     * has its own blob, whose epipolar line runs through this blob. A centre on a known line has
+     * one unknown instead of two, so the discs are found even where the blob's outline shows no
+     * neck or shoulder. The outline is that of the blob's own pixels in \a pixels. Each disc not
+     * fixed is placed on its line by a scan over the blob, then fitted (place and radius) to the
+     * outline points on its circle and outside the others; it must rest on them as a split part
+     * does (restsOnArc()), and every outline point must lie on or inside one of the circles.
+     * \param pixels the image of the last detect(), rows \a stride_bytes apart.
+     * \param discs two to kMaxLineDiscs discs; \param parts receives them, in that order.
+     * \return false, leaving \a parts unspecified, when the discs do not explain the blob.
+     */
+    bool splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
+                      std::span<const DiscOnLine> discs, std::span<Blob> parts);
+    /// Discs splitOnLines() fits at most: a split blob's parts and one more.
+    static constexpr std::size_t kMaxLineDiscs = 6;
+
+    /// \return the blobs of the last detect() that were not round and could not be split (up to
+    /// maxBlobs): bounds, intensity-weighted centre and pixel count, for splitOnLines().
+    std::span<const Blob> refused() const { return refused_.span(); }
+
     const BlobCounters& counters() const { return counters_; }
     const BlobDetectorConfig& config() const { return config_; }
 
@@ -121,6 +169,19 @@ private:
     /// edge; false when neither, or when fewer than \a minParts discs can be centred.
     bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
                         std::uint32_t order, std::size_t minParts = 1);
+    /// The outline of the component through pixel (\a seedX, \a seedY) inside the bounds
+    /// \a left..\a bottom: its pixels into splitMask_ and its outline points into splitEdge_, on a
+    /// grid of the bounds with a frame of one pixel. \return the number of outline points; 0 when
+    /// the bounds are too large or touch the image's border.
+    std::size_t traceOutline(int left, int top, int right, int bottom, int seedX, int seedY,
+                             const std::uint8_t* pixels, int stride_bytes);
+    /// A circle rests on its own outline points when they cover at least half of it (their unit
+    /// vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83
+    /// for a third) and fit it within kSplitFitRms_px, or cover a third of it and fit it within
+    /// kShortArcFitRms_px: a disc with neighbours on several sides, or cut by an edge, keeps only
+    /// a short arc of its own.
+    static bool restsOnArc(double rms_px, double radius_px, std::size_t points,
+                           const Vec2& resultant);
     bool addCandidate(const Blob& blob, std::uint32_t order);
     /// A blob with the bounds and peak of component \a m, to be given its centre and shape.
     static Blob framedBlob(const Moments& m);
@@ -158,6 +219,8 @@ private:
     BoundedVector<std::uint32_t> notRound_;
     /// Round enough to pass as one disc, yet a little long: maybe two discs over each other.
     BoundedVector<std::uint32_t> maybeMerged_;
+    /// This image's blobs refused as not round and not splittable (see refused()).
+    BoundedVector<Blob> refused_;
     /// Scratch of splitIntoDiscs, for a bounding box of at most kSplitSide x kSplitSide pixels.
     static constexpr int kSplitSide = 128;
     /// Discs a blob is split into at most: a marker's image may touch several others, and a
@@ -187,6 +250,26 @@ private:
     std::unique_ptr<std::uint16_t[]> splitDistance_;
     std::unique_ptr<std::uint16_t[]> splitStack_;
     std::unique_ptr<Vec2[]> splitEdge_;
+    /// splitOnLines scans a line at kLineSteps places, scoring at most kLinePoints outline points
+    /// (more are sampled); its scratch holds each point's residual from the other circles.
+    static constexpr int kLineSteps = 48;
+    static constexpr std::size_t kLinePoints = 256;
+    std::unique_ptr<float[]> lineResidual_;
+    /// What traceOutline traced last, in splitEdge_: its tracedEdges_ outline points.
+    struct Traced {
+        const std::uint8_t* pixels = nullptr;
+        int left = 0, top = 0, right = 0, bottom = 0, seedX = 0, seedY = 0;
+        bool operator==(const Traced&) const = default;
+    };
+    Traced traced_{};
+    std::size_t tracedEdges_ = 0;
+    /// splitOnLines holds a disc's radius to its expected size with this weight, against 1 for each
+    /// outline point: about the (0.2 px) scatter of the points over a (0.1 px) trust in the size.
+    static constexpr double kRadiusPrior = 4.0;
+    /// A disc placed by splitOnLines is kept when its place on its line has a standard error of
+    /// at most kLinePlaceError_px, from its points' scatter, taken as no less than kLineNoise_px.
+    static constexpr double kLinePlaceError_px = 0.15;
+    static constexpr double kLineNoise_px = 0.1;
 
     std::unique_ptr<Run[]> previousRuns_;
     std::unique_ptr<Run[]> currentRuns_;

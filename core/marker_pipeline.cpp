@@ -2,7 +2,13 @@
 // points.
 #include "core/marker_pipeline.hpp"
 
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
 #include <optional>
+
+#include "core/triangulation.hpp"
 
 namespace edgetrack {
 
@@ -17,7 +23,9 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
                    BoundedVector<Vec2>(config.blobs.maxBlobs)}
     , stereo_(rig, config.stereo, config.blobs.maxBlobs)
     , markers_(config.stereo.maxMarkers)
-    , points_rig_mm_(config.stereo.maxMarkers) {
+    , points_rig_mm_(config.stereo.maxMarkers)
+    , markerOfBlob_{std::make_unique<int[]>(config.blobs.maxBlobs),
+                    std::make_unique<int[]>(config.blobs.maxBlobs)} {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
         rig.camera(1).intrinsics().height_px != height_px_)
         error_ = "the rig's two cameras must have the same image size";
@@ -44,21 +52,314 @@ void MarkerPipeline::expect(const Vec3& marker_rig_mm) {
             expected_px_[camera].push_back(*pixel);
 }
 
-void MarkerPipeline::matchStereo(StereoMethod method) {
+void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView, 2>& images) {
     if (method == StereoMethod::EpipolarOnly)
         stereo_.matchEpipolarOnly(blobs_[0].span(), blobs_[1].span(), markers_);
     else
         stereo_.match(blobs_[0].span(), blobs_[1].span(), markers_);
+    if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
+        images[1].pixels != nullptr)
+        splitOnEpipolarLines(images);
     points_rig_mm_.clear();
     for (const StereoMarker& marker : markers_)
         points_rig_mm_.push_back(marker.position_rig_mm);
+}
+
+namespace {
+/// The radius (px) of a disc of \a blob's area.
+double radiusOf(const Blob& blob) {
+    return std::sqrt(static_cast<double>(blob.area_px) / 3.14159265358979323846);
+}
+
+/// Whether \a a and \b b are parts of one blob split into discs (they keep its bounds).
+bool partsOfOneBlob(const Blob& a, const Blob& b) {
+    return a.split && b.split && a.left == b.left && a.top == b.top && a.right == b.right &&
+           a.bottom == b.bottom;
+}
+} // namespace
+
+void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {
+    for (std::size_t c = 0; c < 2; ++c)
+        std::fill_n(markerOfBlob_[c].get(), blobs_[c].size(), -1);
+    for (std::size_t m = 0; m < markers_.size(); ++m) {
+        markerOfBlob_[0][static_cast<std::size_t>(markers_[m].blob0)] = static_cast<int>(m);
+        markerOfBlob_[1][static_cast<std::size_t>(markers_[m].blob1)] = static_cast<int>(m);
+    }
+    // Each blob with a partner, or each blob split into parts with partners, once: from its
+    // first part with a partner.
+    for (int camera = 0; camera < 2; ++camera) {
+        const std::size_t other = index(1 - camera);
+        for (std::size_t b = 0; b < blobs_[other].size(); ++b) {
+            const Blob& blob = blobs_[other][b];
+            if (markerOfBlob_[other][b] < 0 || blob.cut)
+                continue;
+            bool seen = false;
+            for (std::size_t e = 0; e < b && !seen; ++e)
+                seen = markerOfBlob_[other][e] >= 0 && partsOfOneBlob(blobs_[other][e], blob);
+            if (!seen)
+                splitWithUnpaired(images[other], camera, static_cast<int>(b));
+        }
+        for (const Blob& refused : detectors_[other].refused())
+            splitRefusedWithUnpaired(images[other], camera, refused);
+    }
+}
+
+std::optional<MarkerPipeline::LineNear>
+MarkerPipeline::epipolarLineNear(int camera, int blob, const Ray& otherRay) const {
+    Ray ray;
+    Vec2 unused;
+    if (!stereo_.preparedBlob(camera, blob, ray, unused))
+        return std::nullopt;
+    const std::optional<TriangulatedPoint> near = triangulate(ray, otherRay);
+    if (!near || near->range0_mm <= 0.0 || near->range1_mm <= 0.0)
+        return std::nullopt;
+    // The image of the ray around its point nearest the other ray, 2% of the range either side.
+    const CameraModel& otherCamera = stereo_.rig().camera(1 - camera);
+    const std::optional<Vec2> from =
+        otherCamera.project(ray.origin_rig_mm + 0.98 * near->range0_mm * ray.direction_rig);
+    const std::optional<Vec2> to =
+        otherCamera.project(ray.origin_rig_mm + 1.02 * near->range0_mm * ray.direction_rig);
+    if (!from || !to || !((*to - *from).norm() > 1e-6))
+        return std::nullopt;
+    return LineNear{PixelLine{*from, (*to - *from).normalized()},
+                    near->range0_mm / near->range1_mm};
+}
+
+void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int shared) {
+    const std::size_t own = index(camera), other = index(1 - camera);
+    const BoundedVector<Blob>& otherBlobs = blobs_[other];
+    const Blob& sharedBlob = otherBlobs[static_cast<std::size_t>(shared)];
+    constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
+    // The blob's discs as it stands: the blob itself, or every part it was split into.
+    std::array<int, kMaxDiscs> member{};
+    std::size_t members = 0;
+    for (std::size_t b = 0; b < otherBlobs.size(); ++b) {
+        if (static_cast<int>(b) != shared && !partsOfOneBlob(otherBlobs[b], sharedBlob))
+            continue;
+        if (members + 1 == kMaxDiscs)
+            return;
+        member[members++] = static_cast<int>(b);
+    }
+
+    // The unpaired blobs of this camera whose epipolar lines cross one of its discs at a
+    // disparity of the working volume: up to kMaxAdded, nearest a disc's row first.
+    constexpr std::size_t kMaxAdded = kMaxDiscs;
+    std::array<std::pair<double, int>, kMaxAdded> candidate{};
+    std::size_t candidates = 0;
+    for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
+        Ray ray;
+        Vec2 rectified;
+        if (markerOfBlob_[own][u] >= 0 ||
+            !stereo_.preparedBlob(camera, static_cast<int>(u), ray, rectified))
+            continue;
+        double off = std::numeric_limits<double>::infinity();
+        for (std::size_t k = 0; k < members; ++k) {
+            Ray partRay;
+            Vec2 partRectified;
+            if (!stereo_.preparedBlob(1 - camera, member[k], partRay, partRectified))
+                continue;
+            const double radius = radiusOf(otherBlobs[static_cast<std::size_t>(member[k])]);
+            const double rowOff = std::abs(partRectified.y() - rectified.y());
+            const double disparity =
+                camera == 0 ? rectified.x() - partRectified.x() : partRectified.x() - rectified.x();
+            if (rowOff <= radius + 1.0 && stereo_.admissibleDisparity(disparity, radius))
+                off = std::min(off, rowOff);
+        }
+        if (!(off < std::numeric_limits<double>::infinity()))
+            continue;
+        std::size_t at = std::min(candidates, kMaxAdded - 1);
+        if (candidates == kMaxAdded && off >= candidate[at].first)
+            continue;
+        for (; at > 0 && candidate[at - 1].first > off; --at)
+            candidate[at] = candidate[at - 1];
+        candidate[at] = {off, static_cast<int>(u)};
+        candidates = std::min(candidates + 1, kMaxAdded);
+    }
+    if (candidates == 0)
+        return;
+
+    // Each part with a partner has its centre on the partner's epipolar line, and keeps its size
+    // (a blob not split yet takes its partner's, as its own is that of several discs); a part
+    // without one stays where it is.
+    Ray sharedRay;
+    Vec2 unused;
+    if (!stereo_.preparedBlob(1 - camera, shared, sharedRay, unused))
+        return;
+    std::array<DiscOnLine, kMaxDiscs> discs{};
+    std::array<int, kMaxDiscs> source{};
+    for (std::size_t k = 0; k < members; ++k) {
+        const Blob& part = otherBlobs[static_cast<std::size_t>(member[k])];
+        const int marker = markerOfBlob_[other][static_cast<std::size_t>(member[k])];
+        discs[k].start_px = part.centre_px;
+        discs[k].radius_px = radiusOf(part);
+        source[k] = -1;
+        Ray partRay;
+        if (marker < 0 || !stereo_.preparedBlob(1 - camera, member[k], partRay, unused)) {
+            discs[k].fixed = true;
+            continue;
+        }
+        const StereoMarker& paired = markers_[static_cast<std::size_t>(marker)];
+        source[k] = camera == 0 ? paired.blob0 : paired.blob1;
+        const std::optional<LineNear> near = epipolarLineNear(camera, source[k], partRay);
+        if (!near)
+            return;
+        discs[k].line = near->line;
+        if (!part.split)
+            discs[k].radius_px =
+                near->scale * radiusOf(blobs_[own][static_cast<std::size_t>(source[k])]);
+    }
+    // The unpaired blobs' discs, of unknown place on their lines: all of them, then fewer.
+    std::array<DiscOnLine, kMaxAdded> added{};
+    for (std::size_t a = 0; a < candidates; ++a) {
+        const std::optional<LineNear> near =
+            epipolarLineNear(camera, candidate[a].second, sharedRay);
+        if (!near)
+            return;
+        const Blob& blob = blobs_[own][static_cast<std::size_t>(candidate[a].second)];
+        added[a] = {near->line, Vec2::Zero(), near->scale * radiusOf(blob), false, false};
+    }
+    std::array<int, kMaxAdded> addedSource{};
+    for (std::size_t a = 0; a < candidates; ++a)
+        addedSource[a] = candidate[a].second;
+    trySplits(image, camera, Blob(sharedBlob), std::span(member.data(), members), discs, source,
+              std::span(added.data(), candidates), std::span(addedSource.data(), candidates), 1);
+}
+
+void MarkerPipeline::splitRefusedWithUnpaired(const ImageView& image, int camera,
+                                              const Blob& refused) {
+    const std::size_t own = index(camera);
+    const std::optional<Ray> ray = stereo_.rig().camera(1 - camera).ray(refused.centre_px);
+    if (!ray)
+        return;
+    const std::optional<Vec2> rectified = stereo_.rig().rectifyDirection(ray->direction_rig);
+    if (!rectified)
+        return;
+    // The unpaired blobs of this camera whose epipolar lines cross the blob's rows at a disparity
+    // of the working volume: up to kMaxAdded, nearest its middle row first.
+    const double halfHeight = 0.5 * (refused.bottom - refused.top + 1);
+    const double halfWidth = 0.5 * (refused.right - refused.left + 1);
+    constexpr std::size_t kMaxAdded = BlobDetector::kMaxLineDiscs;
+    std::array<std::pair<double, int>, kMaxAdded> candidate{};
+    std::size_t candidates = 0;
+    for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
+        Ray unpairedRay;
+        Vec2 unpairedRectified;
+        if (markerOfBlob_[own][u] >= 0 ||
+            !stereo_.preparedBlob(camera, static_cast<int>(u), unpairedRay, unpairedRectified))
+            continue;
+        const double off = std::abs(unpairedRectified.y() - rectified->y());
+        const double disparity = camera == 0 ? unpairedRectified.x() - rectified->x()
+                                             : rectified->x() - unpairedRectified.x();
+        if (off > halfHeight + 1.0 || !stereo_.admissibleDisparity(disparity, halfWidth))
+            continue;
+        std::size_t at = std::min(candidates, kMaxAdded - 1);
+        if (candidates == kMaxAdded && off >= candidate[at].first)
+            continue;
+        for (; at > 0 && candidate[at - 1].first > off; --at)
+            candidate[at] = candidate[at - 1];
+        candidate[at] = {off, static_cast<int>(u)};
+        candidates = std::min(candidates + 1, kMaxAdded);
+    }
+    if (candidates < 2)
+        return;
+    std::array<DiscOnLine, kMaxAdded> added{};
+    for (std::size_t a = 0; a < candidates; ++a) {
+        const std::optional<LineNear> near = epipolarLineNear(camera, candidate[a].second, *ray);
+        if (!near)
+            return;
+        const Blob& blob = blobs_[own][static_cast<std::size_t>(candidate[a].second)];
+        added[a] = {near->line, Vec2::Zero(), near->scale * radiusOf(blob), false, false};
+    }
+    std::array<DiscOnLine, kMaxAdded> discs{};
+    std::array<int, kMaxAdded> source{};
+    std::array<int, kMaxAdded> addedSource{};
+    for (std::size_t a = 0; a < candidates; ++a)
+        addedSource[a] = candidate[a].second;
+    trySplits(image, camera, refused, {}, discs, source, std::span(added.data(), candidates),
+              std::span(addedSource.data(), candidates), 2);
+}
+
+bool MarkerPipeline::trySplits(const ImageView& image, int camera, const Blob& blob,
+                               std::span<const int> member, std::span<DiscOnLine> discs,
+                               std::span<int> source, std::span<const DiscOnLine> added,
+                               std::span<const int> addedSource, std::size_t minAdded) {
+    // Every added disc, then every one but one: a line of a blob whose disc is elsewhere (at
+    // another depth) spoils the fit of all. The nearest lines are kept where room is short.
+    const std::size_t members = member.size();
+    const std::size_t offered = std::min(added.size(), discs.size() - members);
+    for (std::size_t attempt = 0; attempt <= offered; ++attempt) {
+        // Attempt 0 leaves none out; attempt a leaves out added disc a - 1.
+        const std::size_t skip = attempt == 0 ? offered : attempt - 1;
+        const std::size_t count = members + offered - (attempt == 0 ? 0 : 1);
+        if (count - members < minAdded)
+            continue;
+        std::size_t at = members;
+        for (std::size_t a = 0; a < offered; ++a)
+            if (a != skip) {
+                discs[at] = added[a];
+                source[at] = addedSource[a];
+                ++at;
+            }
+        if (splitAndPair(image, camera, blob, member, discs.first(count), source.first(count)))
+            return true;
+    }
+    return false;
+}
+
+bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Blob& blob,
+                                  std::span<const int> member, std::span<const DiscOnLine> discs,
+                                  std::span<const int> source) {
+    const std::size_t own = index(camera), other = index(1 - camera);
+    BoundedVector<Blob>& otherBlobs = blobs_[other];
+    constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
+    const std::size_t members = member.size(), count = discs.size();
+    std::array<Blob, kMaxDiscs> parts{};
+    if (!detectors_[other].splitOnLines(image.pixels, image.stride_bytes, blob, discs,
+                                        std::span(parts.data(), count)))
+        return false;
+    if (otherBlobs.size() + (count - members) > otherBlobs.capacity() ||
+        markers_.size() + (count - members) > markers_.capacity())
+        return false;
+
+    // Every disc with a partner is triangulated again from its new centre, each new one into a
+    // new marker; all must pass stereo's checks.
+    std::array<StereoMarker, kMaxDiscs> triangulated{};
+    for (std::size_t k = 0; k < count; ++k) {
+        if (source[k] < 0)
+            continue;
+        const int at = k < members ? member[k] : static_cast<int>(otherBlobs.size() + k - members);
+        const Blob& partner = blobs_[own][static_cast<std::size_t>(source[k])];
+        const bool ok =
+            camera == 0
+                ? stereo_.triangulateBlobs(partner, source[k], parts[k], at, triangulated[k])
+                : stereo_.triangulateBlobs(parts[k], at, partner, source[k], triangulated[k]);
+        if (!ok)
+            return false;
+    }
+    for (std::size_t k = 0; k < count; ++k) {
+        if (k < members) {
+            if (source[k] < 0)
+                continue;
+            const auto at = static_cast<std::size_t>(member[k]);
+            otherBlobs[at] = parts[k];
+            markers_[static_cast<std::size_t>(markerOfBlob_[other][at])] = triangulated[k];
+            continue;
+        }
+        const std::size_t at = otherBlobs.size();
+        otherBlobs.push_back(parts[k]);
+        markers_.push_back(triangulated[k]);
+        markerOfBlob_[own][static_cast<std::size_t>(source[k])] =
+            static_cast<int>(markers_.size() - 1);
+        markerOfBlob_[other][at] = static_cast<int>(markers_.size() - 1);
+    }
+    return true;
 }
 
 std::span<const Vec3> MarkerPipeline::process(const std::uint8_t* pixels0, int stride0_bytes,
                                               const std::uint8_t* pixels1, int stride1_bytes) {
     detectBlobs(0, pixels0, stride0_bytes);
     detectBlobs(1, pixels1, stride1_bytes);
-    matchStereo();
+    matchStereo(StereoMethod::Svd, {{{pixels0, stride0_bytes}, {pixels1, stride1_bytes}}});
     return points_rig_mm();
 }
 
@@ -69,6 +370,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
         c.splitBlobs += detectors_[camera].counters().splitBlobs;
         c.splitRefused += detectors_[camera].counters().splitRefused;
         c.cutDiscs += detectors_[camera].counters().cutDiscs;
+        c.splitOnLines += detectors_[camera].counters().splitOnLines;
         c.labelOverflow += detectors_[camera].counters().labelOverflow;
         // The detector chooses which blobs fit and counts the rest; the blob vectors count blobs
         // given from outside (blobs level) that did not fit.

@@ -5,6 +5,8 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
+#include <optional>
 #include <span>
 
 #include "core/blob_detector.hpp"
@@ -30,9 +32,17 @@ struct MarkerPipelineCounters {
     std::uint64_t splitRefused = 0;
     /// Discs cut by an edge in front of them, centred by their visible arc.
     std::uint64_t cutDiscs = 0;
+    /// Blobs of two discs split on the epipolar lines of the other camera's separate blobs.
+    std::uint64_t splitOnLines = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;
+};
+
+/// \brief An 8-bit image of the rig's size: its first row, and rows stride_bytes apart.
+struct ImageView {
+    const std::uint8_t* pixels = nullptr;
+    int stride_bytes = 0;
 };
 
 /// \brief How stereo pairs blobs: the paper's matcher, or the epipolar-only baseline of its
@@ -72,8 +82,19 @@ public:
      */
     void detectBlobs(int camera, const std::uint8_t* pixels, int stride_bytes);
 
-    /// \brief Pair blobs(0) with blobs(1) and triangulate: markers() and points_rig_mm().
-    void matchStereo(StereoMethod method = StereoMethod::Svd);
+    /**
+     * \brief Pair blobs(0) with blobs(1) and triangulate: markers() and points_rig_mm().
+     *
+     * Given the two images the blobs were detected in, stereo goes back to them: a blob left
+     * unpaired whose epipolar line runs through a blob of the other image may share that blob
+     * with other discs (markers far over each other in that image, apart in this one). That blob
+     * is then split again on the epipolar lines of all its discs (BlobDetector::splitOnLines()),
+     * and each disc triangulated with its partner. A blob the detector refused as not round is
+     * split so too, when two or more unpaired blobs' lines cross it.
+     * \param images the images of this frame's detectBlobs(), or none (blobs given from outside).
+     */
+    void matchStereo(StereoMethod method = StereoMethod::Svd,
+                     const std::array<ImageView, 2>& images = {});
 
     /// \brief Expect no blob in particular in the next images (see expect()).
     void clearExpected();
@@ -105,6 +126,38 @@ public:
 
 private:
     static std::size_t index(int camera) { return camera == 0 ? 0 : 1; }
+    /// The second pass of matchStereo(): blobs of several discs split on epipolar lines.
+    void splitOnEpipolarLines(const std::array<ImageView, 2>& images);
+    /// Split blob \a shared of camera 1 - \a camera, which has a partner, and the parts split from
+    /// the same blob with it, again with the discs of this camera's unpaired blobs whose epipolar
+    /// lines cross it; blobs and markers are updated when every disc with a partner triangulates.
+    void splitWithUnpaired(const ImageView& image, int camera, int shared);
+    /// Split \a refused, a blob of camera 1 - \a camera that detection could not split, into the
+    /// discs of two or more of this camera's unpaired blobs whose epipolar lines cross it.
+    void splitRefusedWithUnpaired(const ImageView& image, int camera, const Blob& refused);
+    /// In all these, \a image is camera 1 - \a camera's image, whose blob is split.
+    /// Split \a blob with \a discs (its members' filled in) and all of \a added, or all but
+    /// one, at least \a minAdded (see splitAndPair()); true on the first that pairs.
+    bool trySplits(const ImageView& image, int camera, const Blob& blob,
+                   std::span<const int> member, std::span<DiscOnLine> discs, std::span<int> source,
+                   std::span<const DiscOnLine> added, std::span<const int> addedSource,
+                   std::size_t minAdded);
+    /// Split \a blob of camera 1 - \a camera, whose parts so far are blobs \a member (none for a
+    /// refused blob), into \a discs (the members' first), pair each with blob \a source of
+    /// \a camera (-1: none) and triangulate; true, with blobs and markers updated, when every
+    /// pair passes stereo's checks.
+    bool splitAndPair(const ImageView& image, int camera, const Blob& blob,
+                      std::span<const int> member, std::span<const DiscOnLine> discs,
+                      std::span<const int> source);
+    /// An epipolar line in the other camera's image, and the ratio of the point's ranges from
+    /// this camera and from the other (how much larger the other camera sees it).
+    struct LineNear {
+        PixelLine line;
+        double scale;
+    };
+    /// The epipolar line in the other camera's image of blob \a blob of \a camera, near where
+    /// its ray passes \a otherRay (a ray of the other camera).
+    std::optional<LineNear> epipolarLineNear(int camera, int blob, const Ray& otherRay) const;
 
     MarkerPipelineConfig config_;
     int width_px_;
@@ -116,6 +169,8 @@ private:
     StereoMatcher stereo_;
     BoundedVector<StereoMarker> markers_;
     BoundedVector<Vec3> points_rig_mm_;
+    /// Per camera and blob, the index of the marker it is in (-1: none), during matchStereo().
+    std::array<std::unique_ptr<int[]>, 2> markerOfBlob_;
     const char* error_ = nullptr;
 };
 

@@ -361,38 +361,79 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
     counters_.correspondences += pairs.size();
 }
 
-void StereoMatcher::triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out) {
-    const Prepared& p = *prepared_;
-    const std::optional<TriangulatedPoint> point =
-        triangulate(p.rays[0][idx(i)], p.rays[1][idx(j)]);
+bool StereoMatcher::checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0,
+                                  const Vec2& pixel1, StereoMarker& marker) {
+    const std::optional<TriangulatedPoint> point = triangulate(ray0, ray1);
     if (!point || point->range0_mm <= 0.0 || point->range1_mm <= 0.0 ||
         point->rayGap_mm > config_.maxRayGap_mm) {
         ++counters_.rejectedRayGap;
-        return;
+        return false;
     }
     double reprojection = 0.0;
     for (int c = 0; c < 2; ++c) {
         const std::optional<Vec2> back = rig_.camera(c).project(point->point_rig_mm);
-        const Vec2& measured = p.pixel[c][idx(c == 0 ? i : j)];
+        const Vec2& measured = c == 0 ? pixel0 : pixel1;
         reprojection = std::max(reprojection, back ? (*back - measured).norm()
                                                    : std::numeric_limits<double>::infinity());
     }
     if (reprojection > config_.maxReprojection_px) {
         ++counters_.rejectedReprojection;
-        return;
+        return false;
     }
+    marker.position_rig_mm = point->point_rig_mm;
+    marker.rayGap_mm = static_cast<float>(point->rayGap_mm);
+    marker.reprojection_px = static_cast<float>(reprojection);
+    return true;
+}
+
+void StereoMatcher::triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out) {
+    const Prepared& p = *prepared_;
+    StereoMarker candidate;
+    if (!checkedMarker(p.rays[0][idx(i)], p.rays[1][idx(j)], p.pixel[0][idx(i)], p.pixel[1][idx(j)],
+                       candidate))
+        return;
     StereoMarker* marker = out.append();
     if (marker == nullptr) {
         ++counters_.markerOverflow;
         return;
     }
+    *marker = candidate;
     marker->blob0 = i;
     marker->blob1 = j;
-    marker->position_rig_mm = point->point_rig_mm;
-    marker->rayGap_mm = static_cast<float>(point->rayGap_mm);
-    marker->reprojection_px = static_cast<float>(reprojection);
     marker->epipolar_px =
         static_cast<float>(p.rectified[0][idx(i)].y() - p.rectified[1][idx(j)].y());
+}
+
+bool StereoMatcher::preparedBlob(int camera, int i, Ray& ray, Vec2& rectified_px) const {
+    const Prepared& p = *prepared_;
+    const std::size_t c = camera == 0 ? 0 : 1;
+    if (!valid_ || i < 0 || idx(i) >= p.count[c] || !p.valid[c][idx(i)])
+        return false;
+    ray = p.rays[c][idx(i)];
+    rectified_px = p.rectified[c][idx(i)];
+    return true;
+}
+
+bool StereoMatcher::triangulateBlobs(const Blob& blob0, int i, const Blob& blob1, int j,
+                                     StereoMarker& marker) {
+    const std::optional<Ray> ray0 = rig_.camera(0).ray(blob0.centre_px);
+    const std::optional<Ray> ray1 = rig_.camera(1).ray(blob1.centre_px);
+    if (!ray0 || !ray1) {
+        ++counters_.unrectifiable;
+        return false;
+    }
+    const std::optional<Vec2> rectified0 = rig_.rectifyDirection(ray0->direction_rig);
+    const std::optional<Vec2> rectified1 = rig_.rectifyDirection(ray1->direction_rig);
+    if (!rectified0 || !rectified1) {
+        ++counters_.unrectifiable;
+        return false;
+    }
+    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, marker))
+        return false;
+    marker.blob0 = i;
+    marker.blob1 = j;
+    marker.epipolar_px = static_cast<float>(rectified0->y() - rectified1->y());
+    return true;
 }
 
 void StereoMatcher::match(std::span<const Blob> blobs0, std::span<const Blob> blobs1,

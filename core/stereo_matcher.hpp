@@ -101,6 +101,27 @@ public:
     void matchEpipolarOnly(std::span<const Blob> blobs0, std::span<const Blob> blobs1,
                            BoundedVectorView<StereoMarker>& out);
 
+    /**
+     * \brief Triangulate \a blob0 (index \a i in camera 0) and \a blob1 (\a j in camera 1) into
+     * \a marker, with match()'s checks of the rays' gap and the reprojection (and its counters).
+     * \return false when the pair fails them; \a marker is then unspecified.
+     */
+    bool triangulateBlobs(const Blob& blob0, int i, const Blob& blob1, int j, StereoMarker& marker);
+
+    /**
+     * \brief Blob \a i of camera \a camera as the last match() or matchEpipolarOnly() saw it.
+     * \param ray its ray (rig frame); \param rectified_px its rectified position (px).
+     * \return false when it could not be rectified or was not among that call's blobs.
+     */
+    bool preparedBlob(int camera, int i, Ray& ray, Vec2& rectified_px) const;
+
+    /// \return whether \a disparity_px (rectified x of camera 0 minus camera 1) lies within
+    /// \a margin_px of the disparities of the working volume (minDepth_mm to maxDepth_mm).
+    bool admissibleDisparity(double disparity_px, double margin_px = 0.0) const {
+        return disparity_px >= minDisparity_px_ - margin_px &&
+               disparity_px <= maxDisparity_px_ + margin_px;
+    }
+
     // The steps of match(), public so that tests can compare against a full-matrix solution.
     /// \brief Undistort, rectify and cast rays for both cameras' blobs.
     void prepare(std::span<const Blob> blobs0, std::span<const Blob> blobs1);
@@ -121,6 +142,9 @@ private:
     double neighbourhoodDistance(int i, int j) const;
     void collectNeighbours(int camera);
     void triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out);
+    /// Triangulate two rays into \a marker's position, ray gap and reprojection, with the checks.
+    bool checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0, const Vec2& pixel1,
+                       StereoMarker& marker);
 
     StereoRig rig_;
     StereoConfig config_;

@@ -583,7 +583,9 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
         markers_.detectBlobs(c, frame.camera[static_cast<std::size_t>(c)].pixels,
                              frame.camera[static_cast<std::size_t>(c)].stride_bytes);
     const std::int64_t t1 = hostNanos();
-    markers_.matchStereo();
+    markers_.matchStereo(StereoMethod::Svd,
+                         {{{frame.camera[0].pixels, frame.camera[0].stride_bytes},
+                           {frame.camera[1].pixels, frame.camera[1].stride_bytes}}});
     const std::int64_t t2 = hostNanos();
 
     last_.number = frame.number;

@@ -1,6 +1,7 @@
 // Frame-by-frame reading of recordings and C3D files, with blob detection and stereo on demand.
 #include "firmware_app/tools/frame_source.hpp"
 
+#include <array>
 #include <map>
 #include <set>
 #include <vector>
@@ -177,6 +178,9 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
     FrameSourceSummary summary;
     summary.level = recording::levelName(level);
     summary.rig = *rig;
+    // Stereo goes back to the images to split blobs of several discs.
+    std::array<recording::Image8, 2> images;
+    std::array<ImageView, 2> views{};
     for (const recording::FrameRow& row : *frames) {
         if (level == Level::Images) {
             for (int c = 0; c < 2; ++c) {
@@ -185,7 +189,10 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
                     recording::imagePath(input, row.frame, c), in.width_px, in.height_px);
                 if (!image)
                     return image.error();
-                pipeline.detectBlobs(c, image->pixels.data(), image->width);
+                const auto camera = static_cast<std::size_t>(c);
+                images[camera] = std::move(*image);
+                views[camera] = {images[camera].pixels.data(), images[camera].width};
+                pipeline.detectBlobs(c, views[camera].pixels, views[camera].stride_bytes);
             }
         } else {
             pipeline.blobs(0).clear();
@@ -197,7 +204,7 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
                 pipeline.blobs(b.camera).push_back(blob);
             }
         }
-        pipeline.matchStereo();
+        pipeline.matchStereo(StereoMethod::Svd, views);
         MarkerFrame frame;
         frame.frame = row.frame;
         frame.time_s = row.time_s;

@@ -32,7 +32,8 @@ public:
             renderer_.render(images_[camera], rig_.width_px, c, observation, 1.0, frame);
             pipeline_.detectBlobs(c, images_[camera].data(), rig_.width_px);
         }
-        pipeline_.matchStereo(method);
+        pipeline_.matchStereo(
+            method, {{{images_[0].data(), rig_.width_px}, {images_[1].data(), rig_.width_px}}});
         points.assign(pipeline_.points_rig_mm().begin(), pipeline_.points_rig_mm().end());
     }
 
