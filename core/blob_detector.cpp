@@ -38,6 +38,15 @@ inline uint8x16_t maximumOf(const std::uint8_t* row, int length) {
     }
     return vmaxq_u8(vmaxq_u8(m0, m1), vmaxq_u8(m2, m3));
 }
+/// The sum over i < \a count (a multiple of 4) of the smallest of a[i], b[i] and c[i].
+float sumOfSmallest(const float* a, const float* b, const float* c, std::size_t count) {
+    float32x4_t sum = vdupq_n_f32(0.0F);
+    for (std::size_t i = 0; i < count; i += 4)
+        sum = vaddq_f32(sum,
+                        vminq_f32(vld1q_f32(a + i), vminq_f32(vld1q_f32(b + i), vld1q_f32(c + i))));
+    return vaddvq_f32(sum);
+}
+
 /// A circle fitted to outline points (px): Kasa's algebraic fit, then Gauss-Newton on the
 /// geometric distances, which the algebraic fit biases on a partial arc.
 struct Circle {
@@ -160,7 +169,7 @@ BlobDetector::BlobDetector(const BlobDetectorConfig& config, int width_px, int h
     splitDistance_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
     splitStack_ = std::make_unique<std::uint16_t[]>(kSplitPixels);
     splitEdge_ = std::make_unique<Vec2[]>(kSplitPixels);
-    lineResidual_ = std::make_unique<float[]>(kLinePoints);
+    lineResidual_ = std::make_unique<float[]>(kLinePoints * (1 + 2 * kLineSteps));
     labels_ = DisjointSets(config.maxLabels);
     // At most one run per two pixels of a row.
     const auto runsPerRow = static_cast<std::size_t>(width_px / 2 + 1);
@@ -951,49 +960,94 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
         circle[k].radius = discs[k].radius_px;
     }
 
-    // Each movable centre's place on its line, first by a scan over the blob's extent: a place is
+    // Each movable centre's place on its line, first by scans over the blob's extent: a place is
     // scored by the outline points' robust residuals (squared, capped at 1 px^2), each point
-    // taking the smallest of this circle's and the others'. Discs of unknown place first, then
-    // each in turn again, so that a guess biased by the disc it hid is set right.
+    // taking the smallest of all circles'. A disc of unknown place is scanned together with the
+    // movable disc whose line runs nearest its own (two discs far over each other: one of them
+    // alone would sit on both), then every movable disc alone again, so that a guess biased by a
+    // disc it hid is set right.
     const int w = blob.right - blob.left + 1, h = blob.bottom - blob.top + 1;
     const Vec2 middle = blob.centre_px - origin;
     const double reach = 0.5 * std::hypot(w, h) + 1.0;
-    const double step = std::max(0.25, 2.0 * reach / (kLineSteps - 1));
     const std::size_t every = (edges + kLinePoints - 1) / kLinePoints;
     const std::size_t sampled = (edges + every - 1) / every;
-    float* others = lineResidual_.get();
+    // Rows are scored four points at a time; the points beyond the last score nothing.
+    const std::size_t padded = (sampled + 3) & ~std::size_t{3};
     const auto robust = [](double off) { return static_cast<float>(std::min(off * off, 1.0)); };
-    const auto scan = [&](std::size_t k) {
+    // Scratch: the points' smallest residual from the circles not scanned, then one row of
+    // residuals for each place of each scanned circle.
+    float* others = lineResidual_.get();
+    const auto row = [&](std::size_t which, int place) {
+        return others + kLinePoints * (1 + which * kLineSteps + static_cast<std::size_t>(place));
+    };
+    const auto scan = [&](std::size_t k, std::size_t pairedWith) {
+        const bool pair = pairedWith < count;
+        const int steps = pair ? kPairSteps : kLineSteps;
+        const double step = std::max(0.25, 2.0 * reach / (steps - 1));
+        std::array<std::size_t, 2> scanned{k, pair ? pairedWith : k};
+        std::array<double, 2> first{};
+        for (std::size_t which = 0; which < (pair ? 2U : 1U); ++which) {
+            const std::size_t d = scanned[which];
+            first[which] = (middle - onLine[d]).dot(along[d]) - reach;
+            for (int place = 0; place < steps; ++place) {
+                const Vec2 centre = onLine[d] + (first[which] + place * step) * along[d];
+                float* r = row(which, place);
+                for (std::size_t i = 0; i < sampled; ++i)
+                    r[i] = robust((edge[i * every] - centre).norm() - circle[d].radius);
+                std::fill(r + sampled, r + padded, 0.0F);
+            }
+        }
         for (std::size_t i = 0; i < sampled; ++i) {
             float smallest = 1.0F;
             for (std::size_t j = 0; j < count; ++j)
-                if (j != k)
+                if (j != scanned[0] && j != scanned[1])
                     smallest =
                         std::min(smallest, robust((edge[i * every] - circle[j].centre).norm() -
                                                   circle[j].radius));
             others[i] = smallest;
         }
-        const double first = (middle - onLine[k]).dot(along[k]) - reach;
+        std::fill(others + sampled, others + padded, 0.0F);
         float bestCost = std::numeric_limits<float>::infinity();
-        for (int s = 0; s < kLineSteps; ++s) {
-            const Vec2 centre = onLine[k] + (first + s * step) * along[k];
-            float cost = 0.0F;
-            for (std::size_t i = 0; i < sampled; ++i)
-                cost += std::min(others[i],
-                                 robust((edge[i * every] - centre).norm() - circle[k].radius));
-            if (cost < bestCost) {
-                bestCost = cost;
-                at[k] = first + s * step;
+        std::array<int, 2> best{0, 0};
+        for (int p0 = 0; p0 < steps; ++p0)
+            for (int p1 = 0; p1 < (pair ? steps : 1); ++p1) {
+                const float* r0 = row(0, p0);
+                const float* r1 = pair ? row(1, p1) : others;
+                const float cost = sumOfSmallest(others, r0, r1, padded);
+                if (cost < bestCost) {
+                    bestCost = cost;
+                    best = {p0, p1};
+                }
+            }
+        for (std::size_t which = 0; which < (pair ? 2U : 1U); ++which) {
+            const std::size_t d = scanned[which];
+            at[d] = first[which] + best[which] * step;
+            circle[d].centre = onLine[d] + at[d] * along[d];
+        }
+    };
+    for (std::size_t k = 0; k < count; ++k) {
+        if (discs[k].known || discs[k].fixed)
+            continue;
+        // The movable disc whose line passes nearest this one's centre guess, if near enough
+        // for the two discs to overlap.
+        std::size_t nearest = count;
+        double nearestOff = std::numeric_limits<double>::infinity();
+        const Vec2 guess = onLine[k] + (middle - onLine[k]).dot(along[k]) * along[k];
+        for (std::size_t j = 0; j < count; ++j) {
+            if (j == k || discs[j].fixed)
+                continue;
+            const Vec2 toLine = guess - onLine[j];
+            const double off = std::abs(toLine.x() * along[j].y() - toLine.y() * along[j].x());
+            if (off < discs[k].radius_px + discs[j].radius_px && off < nearestOff) {
+                nearestOff = off;
+                nearest = j;
             }
         }
-        circle[k].centre = onLine[k] + at[k] * along[k];
-    };
-    for (std::size_t k = 0; k < count; ++k)
-        if (!discs[k].known && !discs[k].fixed)
-            scan(k);
+        scan(k, nearest);
+    }
     for (std::size_t k = 0; k < count; ++k)
         if (!discs[k].fixed)
-            scan(k);
+            scan(k, count);
 
     // Then each movable circle is fitted (its place on the line and its radius) to its own
     // points: on it (within 1 px) and outside every other (by more than 1 px). A point is at most

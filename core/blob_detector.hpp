@@ -250,9 +250,11 @@ private:
     std::unique_ptr<std::uint16_t[]> splitDistance_;
     std::unique_ptr<std::uint16_t[]> splitStack_;
     std::unique_ptr<Vec2[]> splitEdge_;
-    /// splitOnLines scans a line at kLineSteps places, scoring at most kLinePoints outline points
-    /// (more are sampled); its scratch holds each point's residual from the other circles.
+    /// splitOnLines scans a line at kLineSteps places, two lines together at kPairSteps places
+    /// each, scoring at most kLinePoints outline points (more are sampled); its scratch holds the
+    /// points' residuals from each place scanned and from the circles not scanned.
     static constexpr int kLineSteps = 48;
+    static constexpr int kPairSteps = 24;
     static constexpr std::size_t kLinePoints = 256;
     std::unique_ptr<float[]> lineResidual_;
     /// What traceOutline traced last, in splitEdge_: its tracedEdges_ outline points.

@@ -91,8 +91,15 @@ void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images
         const std::size_t other = index(1 - camera);
         for (std::size_t b = 0; b < blobs_[other].size(); ++b) {
             const Blob& blob = blobs_[other][b];
-            if (markerOfBlob_[other][b] < 0 || blob.cut)
+            if (blob.cut)
                 continue;
+            if (markerOfBlob_[other][b] < 0) {
+                // A blob without a partner that is one blob as detected: perhaps discs of two or
+                // more of this camera's unpaired blobs.
+                if (!blob.split)
+                    splitUnpaired(images[other], camera, Blob(blob), static_cast<int>(b));
+                continue;
+            }
             bool seen = false;
             for (std::size_t e = 0; e < b && !seen; ++e)
                 seen = markerOfBlob_[other][e] >= 0 && partsOfOneBlob(blobs_[other][e], blob);
@@ -100,7 +107,7 @@ void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images
                 splitWithUnpaired(images[other], camera, static_cast<int>(b));
         }
         for (const Blob& refused : detectors_[other].refused())
-            splitRefusedWithUnpaired(images[other], camera, refused);
+            splitUnpaired(images[other], camera, refused, -1);
     }
 }
 
@@ -221,12 +228,12 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
     std::array<int, kMaxAdded> addedSource{};
     for (std::size_t a = 0; a < candidates; ++a)
         addedSource[a] = candidate[a].second;
-    trySplits(image, camera, Blob(sharedBlob), std::span(member.data(), members), discs, source,
+    trySplits(image, camera, {sharedBlob, std::span(member.data(), members), -1}, discs, source,
               std::span(added.data(), candidates), std::span(addedSource.data(), candidates), 1);
 }
 
-void MarkerPipeline::splitRefusedWithUnpaired(const ImageView& image, int camera,
-                                              const Blob& refused) {
+void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blob& refused,
+                                   int replaces) {
     const std::size_t own = index(camera);
     const std::optional<Ray> ray = stereo_.rig().camera(1 - camera).ray(refused.centre_px);
     if (!ray)
@@ -275,17 +282,17 @@ void MarkerPipeline::splitRefusedWithUnpaired(const ImageView& image, int camera
     std::array<int, kMaxAdded> addedSource{};
     for (std::size_t a = 0; a < candidates; ++a)
         addedSource[a] = candidate[a].second;
-    trySplits(image, camera, refused, {}, discs, source, std::span(added.data(), candidates),
-              std::span(addedSource.data(), candidates), 2);
+    trySplits(image, camera, {refused, {}, replaces}, discs, source,
+              std::span(added.data(), candidates), std::span(addedSource.data(), candidates), 2);
 }
 
-bool MarkerPipeline::trySplits(const ImageView& image, int camera, const Blob& blob,
-                               std::span<const int> member, std::span<DiscOnLine> discs,
-                               std::span<int> source, std::span<const DiscOnLine> added,
-                               std::span<const int> addedSource, std::size_t minAdded) {
+bool MarkerPipeline::trySplits(const ImageView& image, int camera, const SplitTarget& target,
+                               std::span<DiscOnLine> discs, std::span<int> source,
+                               std::span<const DiscOnLine> added, std::span<const int> addedSource,
+                               std::size_t minAdded) {
     // Every added disc, then every one but one: a line of a blob whose disc is elsewhere (at
     // another depth) spoils the fit of all. The nearest lines are kept where room is short.
-    const std::size_t members = member.size();
+    const std::size_t members = target.member.size();
     const std::size_t offered = std::min(added.size(), discs.size() - members);
     for (std::size_t attempt = 0; attempt <= offered; ++attempt) {
         // Attempt 0 leaves none out; attempt a leaves out added disc a - 1.
@@ -300,24 +307,32 @@ bool MarkerPipeline::trySplits(const ImageView& image, int camera, const Blob& b
                 source[at] = addedSource[a];
                 ++at;
             }
-        if (splitAndPair(image, camera, blob, member, discs.first(count), source.first(count)))
+        if (splitAndPair(image, camera, target, discs.first(count), source.first(count)))
             return true;
     }
     return false;
 }
 
-bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Blob& blob,
-                                  std::span<const int> member, std::span<const DiscOnLine> discs,
-                                  std::span<const int> source) {
+bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const SplitTarget& target,
+                                  std::span<const DiscOnLine> discs, std::span<const int> source) {
     const std::size_t own = index(camera), other = index(1 - camera);
     BoundedVector<Blob>& otherBlobs = blobs_[other];
     constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
-    const std::size_t members = member.size(), count = discs.size();
+    const std::size_t members = target.member.size(), count = discs.size();
     std::array<Blob, kMaxDiscs> parts{};
-    if (!detectors_[other].splitOnLines(image.pixels, image.stride_bytes, blob, discs,
+    if (!detectors_[other].splitOnLines(image.pixels, image.stride_bytes, target.blob, discs,
                                         std::span(parts.data(), count)))
         return false;
-    if (otherBlobs.size() + (count - members) > otherBlobs.capacity() ||
+    // Where each part goes among the blobs: a member's in its place, the first new one in the
+    // place of the blob it replaces, the others after the last.
+    std::array<int, kMaxDiscs> at{};
+    std::size_t appended = 0;
+    for (std::size_t k = 0; k < count; ++k)
+        at[k] = k < members ? target.member[k]
+                : k == members && target.replaces >= 0
+                    ? target.replaces
+                    : static_cast<int>(otherBlobs.size() + appended++);
+    if (otherBlobs.size() + appended > otherBlobs.capacity() ||
         markers_.size() + (count - members) > markers_.capacity())
         return false;
 
@@ -327,30 +342,31 @@ bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Blob
     for (std::size_t k = 0; k < count; ++k) {
         if (source[k] < 0)
             continue;
-        const int at = k < members ? member[k] : static_cast<int>(otherBlobs.size() + k - members);
         const Blob& partner = blobs_[own][static_cast<std::size_t>(source[k])];
         const bool ok =
             camera == 0
-                ? stereo_.triangulateBlobs(partner, source[k], parts[k], at, triangulated[k])
-                : stereo_.triangulateBlobs(parts[k], at, partner, source[k], triangulated[k]);
+                ? stereo_.triangulateBlobs(partner, source[k], parts[k], at[k], triangulated[k])
+                : stereo_.triangulateBlobs(parts[k], at[k], partner, source[k], triangulated[k]);
         if (!ok)
             return false;
     }
     for (std::size_t k = 0; k < count; ++k) {
+        if (source[k] < 0)
+            continue;
+        const auto place = static_cast<std::size_t>(at[k]);
         if (k < members) {
-            if (source[k] < 0)
-                continue;
-            const auto at = static_cast<std::size_t>(member[k]);
-            otherBlobs[at] = parts[k];
-            markers_[static_cast<std::size_t>(markerOfBlob_[other][at])] = triangulated[k];
+            otherBlobs[place] = parts[k];
+            markers_[static_cast<std::size_t>(markerOfBlob_[other][place])] = triangulated[k];
             continue;
         }
-        const std::size_t at = otherBlobs.size();
-        otherBlobs.push_back(parts[k]);
+        if (place < otherBlobs.size())
+            otherBlobs[place] = parts[k];
+        else
+            otherBlobs.push_back(parts[k]);
         markers_.push_back(triangulated[k]);
-        markerOfBlob_[own][static_cast<std::size_t>(source[k])] =
-            static_cast<int>(markers_.size() - 1);
-        markerOfBlob_[other][at] = static_cast<int>(markers_.size() - 1);
+        const int marker = static_cast<int>(markers_.size() - 1);
+        markerOfBlob_[own][static_cast<std::size_t>(source[k])] = marker;
+        markerOfBlob_[other][place] = marker;
     }
     return true;
 }

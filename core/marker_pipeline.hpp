@@ -128,27 +128,34 @@ private:
     static std::size_t index(int camera) { return camera == 0 ? 0 : 1; }
     /// The second pass of matchStereo(): blobs of several discs split on epipolar lines.
     void splitOnEpipolarLines(const std::array<ImageView, 2>& images);
+    // In the steps of that pass, \a camera is the camera of the unpaired blobs, and \a image
+    // is the other camera's image, whose blob is split.
     /// Split blob \a shared of camera 1 - \a camera, which has a partner, and the parts split from
     /// the same blob with it, again with the discs of this camera's unpaired blobs whose epipolar
     /// lines cross it; blobs and markers are updated when every disc with a partner triangulates.
     void splitWithUnpaired(const ImageView& image, int camera, int shared);
-    /// Split \a refused, a blob of camera 1 - \a camera that detection could not split, into the
-    /// discs of two or more of this camera's unpaired blobs whose epipolar lines cross it.
-    void splitRefusedWithUnpaired(const ImageView& image, int camera, const Blob& refused);
-    /// In all these, \a image is camera 1 - \a camera's image, whose blob is split.
-    /// Split \a blob with \a discs (its members' filled in) and all of \a added, or all but
+    /// A blob of camera 1 - camera to split: its parts so far (blobs of that camera; none for a
+    /// blob taken as one disc or refused), and the blob its first new disc replaces (-1: none).
+    struct SplitTarget {
+        Blob blob;
+        std::span<const int> member;
+        int replaces = -1;
+    };
+    /// Split \a blob, a blob of camera 1 - \a camera without a partner (the blob at \a replaces)
+    /// or refused by detection as not round (\a replaces -1), into the discs of two or more of
+    /// this camera's unpaired blobs whose epipolar lines cross it.
+    void splitUnpaired(const ImageView& image, int camera, const Blob& blob, int replaces);
+    /// Split \a target with \a discs (its members' filled in) and all of \a added, or all but
     /// one, at least \a minAdded (see splitAndPair()); true on the first that pairs.
-    bool trySplits(const ImageView& image, int camera, const Blob& blob,
-                   std::span<const int> member, std::span<DiscOnLine> discs, std::span<int> source,
+    bool trySplits(const ImageView& image, int camera, const SplitTarget& target,
+                   std::span<DiscOnLine> discs, std::span<int> source,
                    std::span<const DiscOnLine> added, std::span<const int> addedSource,
                    std::size_t minAdded);
-    /// Split \a blob of camera 1 - \a camera, whose parts so far are blobs \a member (none for a
-    /// refused blob), into \a discs (the members' first), pair each with blob \a source of
+    /// Split \a target into \a discs (its members' first), pair each with blob \a source of
     /// \a camera (-1: none) and triangulate; true, with blobs and markers updated, when every
     /// pair passes stereo's checks.
-    bool splitAndPair(const ImageView& image, int camera, const Blob& blob,
-                      std::span<const int> member, std::span<const DiscOnLine> discs,
-                      std::span<const int> source);
+    bool splitAndPair(const ImageView& image, int camera, const SplitTarget& target,
+                      std::span<const DiscOnLine> discs, std::span<const int> source);
     /// An epipolar line in the other camera's image, and the ratio of the point's ranges from
     /// this camera and from the other (how much larger the other camera sees it).
     struct LineNear {

@@ -431,6 +431,104 @@ TEST(BlobDetector, CentresADiscCutByAnEdgeFromItsVisibleArc) {
     EXPECT_EQ(detector.counters().cutDiscs, discs.size());
 }
 
+// A line through \a centre_px along \a direction, given by a point \a before_px back along it.
+PixelLine lineThrough(const Vec2& centre_px, const Vec2& direction, double before_px) {
+    return {centre_px - before_px * direction.normalized(), direction.normalized()};
+}
+
+TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
+    // Two discs 0.22 to 0.24 diameters apart make one round blob with hardly a neck: detection
+    // alone keeps some as one blob between them. With a line for each centre (in a rig, the
+    // epipolar lines of the discs' own blobs in the other camera) both are found within 0.15 px:
+    // the one whose blob was paired starting from the blob's centre, the other searched along its
+    // line.
+    Image image(640, 480);
+    const std::vector<sim::Glint> pairs[] = {{disc(100.3, 100.6, 6.0), disc(102.9, 101.5, 6.0)},
+                                             {disc(300.45, 200.2, 5.0), disc(298.2, 201.0, 5.5)},
+                                             {disc(450.2, 300.7, 8.0), disc(453.8, 299.6, 8.0)}};
+    // The size of each disc is known from the other camera, where it is a blob of its own: here
+    // a twin of each, alone, 60 px (first disc) or 100 px (second) below.
+    const std::array<Vec2, 2> twinOffset{Vec2(0.0, 60.0), Vec2(0.0, 100.0)};
+    std::vector<sim::Glint> all;
+    for (const auto& pair : pairs)
+        for (std::size_t k = 0; k < 2; ++k) {
+            const Vec2 twin = pair[k].centre_px + twinOffset[k];
+            all.push_back(pair[k]);
+            all.push_back(disc(twin.x(), twin.y(), pair[k].radiusMajor_px));
+        }
+    drawSpots(image, all);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    EXPECT_LT(blobs.size(), 12u) << "detection alone keeps a pair or more as one blob";
+    const auto radiusOfTwin = [&](const sim::Glint& d, std::size_t k) {
+        const Blob* twin = nearestBlob(blobs, d.centre_px + twinOffset[k]);
+        return std::sqrt(static_cast<double>(twin->area_px) / 3.14159265358979323846);
+    };
+    double sum2 = 0.0;
+    for (const auto& pair : pairs) {
+        const Blob* blob = nearestBlob(blobs, 0.5 * (pair[0].centre_px + pair[1].centre_px));
+        ASSERT_NE(blob, nullptr);
+        // Rows of a rectified rig are nearly along x; the lines slope a little, as epipolar
+        // lines of a toed-in rig do.
+        std::array<DiscOnLine, 2> discs{};
+        discs[0].line = lineThrough(pair[0].centre_px, {1.0, 0.02}, 7.0);
+        discs[0].start_px = blob->centre_px;
+        discs[0].radius_px = radiusOfTwin(pair[0], 0);
+        discs[1].line = lineThrough(pair[1].centre_px, {1.0, -0.03}, -5.0);
+        discs[1].radius_px = radiusOfTwin(pair[1], 1);
+        discs[1].known = false;
+        std::array<Blob, 2> parts{};
+        ASSERT_TRUE(detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts))
+            << "pair at " << pair[0].centre_px.transpose();
+        for (std::size_t k = 0; k < 2; ++k) {
+            const double error = (parts[k].centre_px - pair[k].centre_px).norm();
+            EXPECT_LT(error, 0.25) << "disc at " << pair[k].centre_px.transpose();
+            EXPECT_TRUE(parts[k].split);
+            sum2 += error * error;
+        }
+    }
+    EXPECT_LT(std::sqrt(sum2 / 6.0), 0.15);
+    EXPECT_EQ(detector.counters().splitOnLines, 3u);
+}
+
+TEST(BlobDetector, RefusesLinesThatDoNotExplainTheBlob) {
+    // A single disc has no second disc on any line through it; two discs with a line for only
+    // one of them leave the other's arc unexplained; a line that misses the blob places no disc.
+    Image image(640, 480);
+    drawSpots(image, {disc(100.3, 100.6, 6.0), disc(300.2, 200.4, 6.0), disc(306.9, 201.1, 6.0)});
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    const Blob* single = nearestBlob(blobs, {100.3, 100.6});
+    ASSERT_NE(single, nullptr);
+    std::array<DiscOnLine, 2> discs{};
+    discs[0].line = lineThrough({100.3, 100.6}, {1.0, 0.0}, 3.0);
+    discs[0].start_px = single->centre_px;
+    discs[0].radius_px = 6.6;
+    discs[1].line = lineThrough({100.0, 103.5}, {1.0, 0.0}, 3.0);
+    discs[1].radius_px = 6.6;
+    discs[1].known = false;
+    std::array<Blob, 2> parts{};
+    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *single, discs, parts))
+        << "one disc";
+    discs[1].line = lineThrough({100.0, 140.0}, {1.0, 0.0}, 3.0);
+    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *single, discs, parts))
+        << "a line beside the blob";
+
+    // The two touching discs at 300 are split by detection; a line for one of them and another
+    // through empty rows of the blob's box explain half of it.
+    const Blob* left = nearestBlob(blobs, {300.2, 200.4});
+    ASSERT_NE(left, nullptr);
+    ASSERT_TRUE(left->split);
+    discs[0].line = lineThrough({300.2, 200.4}, {1.0, 0.0}, 3.0);
+    discs[0].start_px = left->centre_px;
+    discs[1].line = lineThrough({303.0, 195.0}, {1.0, 0.0}, 3.0);
+    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *left, discs, parts))
+        << "the right disc left out";
+    EXPECT_EQ(detector.counters().splitOnLines, 0u);
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
