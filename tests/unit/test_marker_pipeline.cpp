@@ -1,5 +1,6 @@
 // Tests of the marker front end: images or blobs in, the rig's 3D markers out, without allocating.
 #include <algorithm>
+#include <optional>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -115,6 +116,75 @@ TEST(MarkerPipeline, RefusesCamerasOfDifferentSizes) {
     const MarkerPipeline pipeline(mixed, MarkerPipelineConfig{});
     EXPECT_FALSE(pipeline.isValid());
     EXPECT_NE(std::string(pipeline.error()).find("same image size"), std::string::npos);
+}
+
+TEST(MarkerPipeline, SplitsABlobOfTwoMarkersTheOtherCameraSeesApart) {
+    // Marker b lies 70 mm behind marker a, on the ray of camera 1 that passes 4 px beside a's
+    // image, and looks smaller: camera 1 sees one blob, a's disc with b's peeking out 1.5 px at
+    // its side, camera 0 two blobs 15 px apart. Stereo alone pairs at most one of them; going
+    // back to camera 1's image it splits the blob on the epipolar lines of camera 0's two blobs
+    // and finds both. b's centre, from 10 outline points pushed out by a's light, is 0.2 px off
+    // in camera 1, 0.8 mm in depth at 670 mm.
+    const StereoRig rig = test::desktopRig();
+    const int width = rig.camera(0).intrinsics().width_px;
+    const int height = rig.camera(0).intrinsics().height_px;
+    const Vec3 a_rig_mm(30.0, -20.0, 600.0);
+    const std::optional<Vec2> a1 = rig.camera(1).project(a_rig_mm);
+    ASSERT_TRUE(a1);
+    const std::optional<Ray> ray = rig.camera(1).ray(*a1 + Vec2(4.0, 0.5));
+    ASSERT_TRUE(ray);
+    const double range_mm = (670.0 - ray->origin_rig_mm.z()) / ray->direction_rig.z();
+    const Vec3 b_rig_mm = ray->origin_rig_mm + range_mm * ray->direction_rig;
+
+    sim::Observation observation;
+    std::vector<std::uint8_t> images[2];
+    const sim::FrameRenderer renderer(width, height, 10.0, 0.0, 1);
+    for (int c = 0; c < 2; ++c) {
+        const auto camera = static_cast<std::size_t>(c);
+        for (const Vec3& marker : {a_rig_mm, b_rig_mm}) {
+            sim::Glint glint;
+            glint.centre_px = *rig.camera(c).project(marker);
+            glint.radiusMajor_px = glint.radiusMinor_px = marker == a_rig_mm ? 7.0 : 4.5;
+            glint.peak_dn = 900.0;
+            observation.glints[camera].push_back(glint);
+        }
+        images[camera].assign(static_cast<std::size_t>(width * height), 0);
+        renderer.render(images[camera], width, c, observation, 1.0, 0);
+    }
+    MarkerPipeline pipeline(rig, MarkerPipelineConfig{});
+    ASSERT_TRUE(pipeline.isValid()) << pipeline.error();
+    for (int c = 0; c < 2; ++c)
+        pipeline.detectBlobs(c, images[static_cast<std::size_t>(c)].data(), width);
+    ASSERT_EQ(pipeline.blobs(0).size(), 2u);
+    ASSERT_EQ(pipeline.blobs(1).size(), 1u) << "one blob in camera 1 to detection alone";
+    const auto found = [&](const Vec3& marker) {
+        return std::any_of(pipeline.points_rig_mm().begin(), pipeline.points_rig_mm().end(),
+                           [&](const Vec3& p) { return (p - marker).norm() < 1.0; });
+    };
+    pipeline.matchStereo();
+    EXPECT_FALSE(found(a_rig_mm) && found(b_rig_mm)) << "stereo alone";
+
+    pipeline.matchStereo(StereoMethod::Svd,
+                         {{{images[0].data(), width}, {images[1].data(), width}}});
+    EXPECT_TRUE(found(a_rig_mm));
+    EXPECT_TRUE(found(b_rig_mm));
+    EXPECT_EQ(pipeline.points_rig_mm().size(), 2u);
+    EXPECT_EQ(pipeline.blobs(1).size(), 2u);
+    EXPECT_EQ(pipeline.counters().splitOnLines, 1u);
+    for (const Blob& blob : pipeline.blobs(1))
+        EXPECT_TRUE(blob.split);
+
+    // Again and again, without allocating.
+    const std::uint64_t allocations = test::countAllocations([&] {
+        for (int i = 0; i < 20; ++i) {
+            for (int c = 0; c < 2; ++c)
+                pipeline.detectBlobs(c, images[static_cast<std::size_t>(c)].data(), width);
+            pipeline.matchStereo(StereoMethod::Svd,
+                                 {{{images[0].data(), width}, {images[1].data(), width}}});
+        }
+    });
+    EXPECT_EQ(allocations, 0u);
+    EXPECT_EQ(pipeline.counters().splitOnLines, 21u);
 }
 
 TEST(MarkerPipeline, AFrameAllocatesNothing) {
