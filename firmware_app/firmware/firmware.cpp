@@ -626,6 +626,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsSplit = refused.splitBlobs;
     counters_.blobsNotSplit = refused.splitRefused;
     counters_.blobsCut = refused.cutDiscs;
+    counters_.blobsSplitOnLines = refused.splitOnLines;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -731,6 +732,7 @@ std::string Firmware::statusReport() const {
     row("blobs of touching markers split", c.blobsSplit);
     row("blobs not round, not split", c.blobsNotSplit);
     row("discs cut by an edge, centred by their arc", c.blobsCut);
+    row("blobs split on the other camera's lines", c.blobsSplitOnLines);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();
