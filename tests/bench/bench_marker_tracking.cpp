@@ -1,11 +1,14 @@
 // Benchmarks of marker tracking on one core: blob detection of a 1280x800 frame pair beside the
-// memory floor and OpenCV, and stereo plus frame-to-frame correspondence for about 60 markers.
+// memory floor and OpenCV, stereo plus frame-to-frame correspondence for about 60 markers, and
+// the front end on touching markers.
+#include <array>
 #include <cstdint>
 #include <vector>
 
 #include <benchmark/benchmark.h>
 
 #include "core/blob_detector.hpp"
+#include "core/marker_pipeline.hpp"
 #include "core/marker_tracker.hpp"
 #include "core/simd/neon.hpp"
 #include "core/stereo_matcher.hpp"
@@ -173,6 +176,45 @@ void BM_StereoAndFrameToFrame(benchmark::State& state) {
         static_cast<double>(markerCount) / static_cast<double>(std::max<std::size_t>(frame, 1));
 }
 BENCHMARK(BM_StereoAndFrameToFrame)->Unit(benchmark::kMicrosecond);
+
+// The whole front end (both images' blobs, stereo) on the touching scene, where a third of the
+// markers touch another in one image, over 32 consecutive frames. With "lines" set, stereo goes
+// back to the images and splits blobs on the other camera's epipolar lines: the difference is
+// what that pass costs.
+void BM_FrontEndTouching(benchmark::State& state) {
+    constexpr std::uint64_t kFirstFrame = 300;
+    constexpr std::size_t kFrames = 32;
+    const sim::World world(*sim::makeScene("touching", 1), 1);
+    const sim::RigSpec& rig = world.scene().rig;
+    const sim::FrameRenderer renderer(rig.width_px, rig.height_px, world.scene().background_dn,
+                                      world.scene().noiseSigma_dn, 1);
+    std::vector<std::vector<std::uint8_t>> images;
+    sim::Observation observation;
+    for (std::size_t f = 0; f < kFrames; ++f) {
+        world.observe(kFirstFrame + f, observation);
+        for (int c = 0; c < 2; ++c) {
+            images.emplace_back(static_cast<std::size_t>(rig.width_px * rig.height_px));
+            renderer.render(images.back(), rig.width_px, c, observation, 1.0, kFirstFrame + f);
+        }
+    }
+    MarkerPipeline pipeline(world.rig(), MarkerPipelineConfig{});
+    const bool lines = state.range(0) != 0;
+    std::size_t frame = 0, markerCount = 0;
+    for (auto _ : state) {
+        const std::size_t f = frame % kFrames;
+        const std::array<ImageView, 2> views{
+            {{images[2 * f].data(), rig.width_px}, {images[2 * f + 1].data(), rig.width_px}}};
+        for (int c = 0; c < 2; ++c)
+            pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, rig.width_px);
+        pipeline.matchStereo(StereoMethod::Svd, lines ? views : std::array<ImageView, 2>{});
+        benchmark::DoNotOptimize(pipeline.points_rig_mm().data());
+        markerCount += pipeline.markers().size();
+        ++frame;
+    }
+    state.counters["markers"] =
+        static_cast<double>(markerCount) / static_cast<double>(std::max<std::size_t>(frame, 1));
+}
+BENCHMARK(BM_FrontEndTouching)->ArgName("lines")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 } // namespace
 
