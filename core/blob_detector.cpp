@@ -1117,17 +1117,10 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
             }
     }
 
-    // Every movable disc rests on an arc of its own, of about the size expected, and together the
-    // discs explain the whole outline: a disc no line was given for is no case for this.
-    std::size_t unexplained = 0;
-    for (std::size_t i = 0; i < edges; ++i) {
-        bool explained = false;
-        for (std::size_t k = 0; k < count && !explained; ++k)
-            explained = (edge[i] - circle[k].centre).norm() <= circle[k].radius + 1.0;
-        unexplained += explained ? 0U : 1U;
-    }
-    if (unexplained * 20 > edges)
-        return false;
+    // Every movable disc rests on an arc of its own and is of about the size expected. The discs
+    // need not explain the whole outline: a blob of many discs may hold one whose blob in the
+    // other image is not among those given (paired elsewhere, or cut); the discs given are no
+    // less sure for it.
     findOwners();
     for (std::size_t k = 0; k < count; ++k) {
         const Normal e = normalOf(k);

@@ -135,16 +135,19 @@ public:
      * one unknown instead of two, so the discs are found even where the blob's outline shows no
      * neck or shoulder. The outline is that of the blob's own pixels in \a pixels. Each disc not
      * fixed is placed on its line by a scan over the blob, then fitted (place and radius) to the
-     * outline points on its circle and outside the others; it must rest on them as a split part
-     * does (restsOnArc()), and every outline point must lie on or inside one of the circles.
+     * outline points on its circle and outside the others. It must rest on them: a fit within
+     * kSplitFitRms_px, a place on its line known within kLinePlaceError_px (standard error), a
+     * radius within a third of the expected one. The discs need not explain the whole outline:
+     * a blob of many discs may hold one whose line is not given.
      * \param pixels the image of the last detect(), rows \a stride_bytes apart.
      * \param discs two to kMaxLineDiscs discs; \param parts receives them, in that order.
-     * \return false, leaving \a parts unspecified, when the discs do not explain the blob.
+     * \return false, leaving \a parts unspecified, when a disc does not rest on its own arc.
      */
     bool splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
                       std::span<const DiscOnLine> discs, std::span<Blob> parts);
-    /// Discs splitOnLines() fits at most: a split blob's parts and one more.
-    static constexpr std::size_t kMaxLineDiscs = 6;
+    /// Discs splitOnLines() fits at most: the touching renders show blobs of eight markers, of
+    /// which detection split five at most.
+    static constexpr std::size_t kMaxLineDiscs = 8;
 
     /// \return the blobs of the last detect() that were not round and could not be split (up to
     /// maxBlobs): bounds, intensity-weighted centre and pixel count, for splitOnLines().

@@ -492,9 +492,9 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
     EXPECT_EQ(detector.counters().splitOnLines, 3u);
 }
 
-TEST(BlobDetector, RefusesLinesThatDoNotExplainTheBlob) {
-    // A single disc has no second disc on any line through it; two discs with a line for only
-    // one of them leave the other's arc unexplained; a line that misses the blob places no disc.
+TEST(BlobDetector, RefusesADiscWithoutAnArcOfItsOwn) {
+    // A single disc has no second disc on a line through it, nor on a line that misses it; two
+    // touching discs have none on a line through the top of their blob.
     Image image(640, 480);
     drawSpots(image, {disc(100.3, 100.6, 6.0), disc(300.2, 200.4, 6.0), disc(306.9, 201.1, 6.0)});
     BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
@@ -517,7 +517,7 @@ TEST(BlobDetector, RefusesLinesThatDoNotExplainTheBlob) {
         << "a line beside the blob";
 
     // The two touching discs at 300 are split by detection; a line for one of them and another
-    // through empty rows of the blob's box explain half of it.
+    // through the blob's top rows, where no disc lies.
     const Blob* left = nearestBlob(blobs, {300.2, 200.4});
     ASSERT_NE(left, nullptr);
     ASSERT_TRUE(left->split);
@@ -525,7 +525,7 @@ TEST(BlobDetector, RefusesLinesThatDoNotExplainTheBlob) {
     discs[0].start_px = left->centre_px;
     discs[1].line = lineThrough({303.0, 195.0}, {1.0, 0.0}, 3.0);
     EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *left, discs, parts))
-        << "the right disc left out";
+        << "a line through no disc";
     EXPECT_EQ(detector.counters().splitOnLines, 0u);
 }
 
