@@ -912,10 +912,13 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     return true;
 }
 
-bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
-                                std::span<const DiscOnLine> discs, std::span<Blob> parts) {
-    if (discs.size() < 2 || discs.size() > kMaxLineDiscs || parts.size() < discs.size())
-        return false;
+std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes,
+                                       const Blob& blob, std::span<const DiscOnLine> discs,
+                                       std::span<Blob> parts, std::span<bool> placed) {
+    if (discs.size() < 2 || discs.size() > kMaxLineDiscs || parts.size() < discs.size() ||
+        placed.size() < discs.size())
+        return 0;
+    std::fill_n(placed.begin(), discs.size(), false);
     // The blob's own pixels grow from its brightest pixel next to its centre.
     const auto level = [&](int x, int y) {
         return static_cast<int>(pixels[static_cast<std::ptrdiff_t>(y) * stride_bytes + x]);
@@ -932,7 +935,7 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
                 seedLevel = level(x, y);
             }
     if (seedX < 0)
-        return false;
+        return 0;
     // Tried again with other discs, the same blob keeps its outline.
     const Traced key{pixels, blob.left, blob.top, blob.right, blob.bottom, seedX, seedY};
     const std::size_t edges = key == traced_
@@ -940,7 +943,7 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
                                   : traceOutline(blob.left, blob.top, blob.right, blob.bottom,
                                                  seedX, seedY, pixels, stride_bytes);
     if (edges < 8 * discs.size())
-        return false;
+        return 0;
     // Grid coordinates, as traceOutline's; a centre on a line is onLine + at * along.
     const Vec2 origin(blob.left - 1, blob.top - 1);
     const Vec2* edge = splitEdge_.get();
@@ -951,7 +954,7 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
     for (std::size_t k = 0; k < count; ++k) {
         const double length = discs[k].line.direction.norm();
         if (!(length > 1e-9) || !(discs[k].radius_px >= 1.0) || !(discs[k].radius_px < kSplitSide))
-            return false;
+            return 0;
         onLine[k] = discs[k].line.point_px - origin;
         along[k] = discs[k].line.direction / length;
         const Vec2 start = (discs[k].known ? discs[k].start_px : blob.centre_px) - origin;
@@ -1105,10 +1108,10 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
             for (int iteration = 0; iteration < 3 && !discs[k].fixed; ++iteration) {
                 const Normal e = normalOf(k);
                 if (e.n < 5)
-                    return false;
+                    break; // judged below
                 const Eigen::Vector2d change = e.jtj.ldlt().solve(-e.jtr);
                 if (!change.allFinite())
-                    return false;
+                    return 0;
                 at[k] += change.x();
                 circle[k].radius += change.y();
                 circle[k].centre = onLine[k] + at[k] * along[k];
@@ -1117,24 +1120,25 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
             }
     }
 
-    // Every movable disc rests on an arc of its own and is of about the size expected. The discs
-    // need not explain the whole outline: a blob of many discs may hold one whose blob in the
-    // other image is not among those given (paired elsewhere, or cut); the discs given are no
-    // less sure for it.
+    // A disc is placed when it rests on an arc of its own and is of about the size expected; each
+    // is judged on its own. The discs need not explain the whole outline: a blob of many discs
+    // may hold one whose blob in the other image is not among those given (paired elsewhere, or
+    // cut), and a disc the detector split off badly may fail; the others are no less sure.
     findOwners();
+    std::size_t placedCount = 0;
     for (std::size_t k = 0; k < count; ++k) {
+        if (discs[k].fixed)
+            continue;
         const Normal e = normalOf(k);
         circle[k].rms = std::sqrt(e.sum2 / static_cast<double>(std::max<std::size_t>(e.n, 1)));
-        if (!discs[k].fixed) {
-            // The standard error of the place on the line, from the points' scatter (no less
-            // than kLineNoise_px) and how the arc's points constrain it.
-            const double spread = std::max(circle[k].rms, kLineNoise_px);
-            const double placeError = spread * std::sqrt(e.jtj.inverse()(0, 0));
-            if (e.n < 5 || circle[k].rms > kSplitFitRms_px || !(placeError <= kLinePlaceError_px) ||
-                circle[k].radius < 0.75 * discs[k].radius_px ||
-                circle[k].radius > 1.33 * discs[k].radius_px)
-                return false;
-        }
+        // The standard error of the place on the line, from the points' scatter (no less than
+        // kLineNoise_px) and how the arc's points constrain it.
+        const double spread = std::max(circle[k].rms, kLineNoise_px);
+        const double placeError = spread * std::sqrt(e.jtj.inverse()(0, 0));
+        if (e.n < 5 || circle[k].rms > kSplitFitRms_px || !(placeError <= kLinePlaceError_px) ||
+            circle[k].radius < 0.75 * discs[k].radius_px ||
+            circle[k].radius > 1.33 * discs[k].radius_px)
+            continue;
         Blob& part = parts[k];
         part = blob;
         part.centre_px = circle[k].centre + origin;
@@ -1144,9 +1148,12 @@ bool BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes, co
         part.split = true;
         part.cut = false;
         part.fitRms_px = static_cast<float>(circle[k].rms);
+        placed[k] = true;
+        ++placedCount;
     }
-    ++counters_.splitOnLines;
-    return true;
+    if (placedCount > 0)
+        ++counters_.splitOnLines;
+    return placedCount;
 }
 
 } // namespace edgetrack

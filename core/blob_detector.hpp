@@ -94,7 +94,8 @@ struct BlobCounters {
     std::uint64_t splitParts = 0;   ///< discs those gave
     std::uint64_t splitRefused = 0; ///< blobs not round that could not be split with confidence
     std::uint64_t cutDiscs = 0;     ///< discs cut by an edge, centred by their visible arc
-    /// Blobs split again, with one disc more, on the epipolar lines of the other camera's blobs.
+    /// Blobs split again, with at least one disc placed, on the epipolar lines of the other
+    /// camera's blobs.
     std::uint64_t splitOnLines = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
@@ -135,16 +136,20 @@ public:
      * one unknown instead of two, so the discs are found even where the blob's outline shows no
      * neck or shoulder. The outline is that of the blob's own pixels in \a pixels. Each disc not
      * fixed is placed on its line by a scan over the blob, then fitted (place and radius) to the
-     * outline points on its circle and outside the others. It must rest on them: a fit within
-     * kSplitFitRms_px, a place on its line known within kLinePlaceError_px (standard error), a
-     * radius within a third of the expected one. The discs need not explain the whole outline:
-     * a blob of many discs may hold one whose line is not given.
+     * outline points on its circle and outside the others. It is placed when it rests on them:
+     * a fit within kSplitFitRms_px, a place on its line known within kLinePlaceError_px
+     * (standard error), a radius within a third of the expected one. Each disc is judged on its
+     * own; the discs need not explain the whole outline (a blob of many discs may hold one whose
+     * line is not given).
      * \param pixels the image of the last detect(), rows \a stride_bytes apart.
-     * \param discs two to kMaxLineDiscs discs; \param parts receives them, in that order.
-     * \return false, leaving \a parts unspecified, when a disc does not rest on its own arc.
+     * \param discs two to kMaxLineDiscs discs; \param parts receives them, in that order, and
+     * \param placed whether each was placed (a fixed disc never is; the parts of those not
+     * placed are unspecified).
+     * \return how many discs were placed.
      */
-    bool splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
-                      std::span<const DiscOnLine> discs, std::span<Blob> parts);
+    std::size_t splitOnLines(const std::uint8_t* pixels, int stride_bytes, const Blob& blob,
+                             std::span<const DiscOnLine> discs, std::span<Blob> parts,
+                             std::span<bool> placed);
     /// Discs splitOnLines() fits at most: the touching renders show blobs of eight markers, of
     /// which detection split five at most.
     static constexpr std::size_t kMaxLineDiscs = 8;

@@ -320,55 +320,56 @@ bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Spli
     constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
     const std::size_t members = target.member.size(), count = discs.size();
     std::array<Blob, kMaxDiscs> parts{};
-    if (!detectors_[other].splitOnLines(image.pixels, image.stride_bytes, target.blob, discs,
-                                        std::span(parts.data(), count)))
-        return false;
-    // Where each part goes among the blobs: a member's in its place, the first new one in the
-    // place of the blob it replaces, the others after the last.
-    std::array<int, kMaxDiscs> at{};
-    std::size_t appended = 0;
-    for (std::size_t k = 0; k < count; ++k)
-        at[k] = k < members ? target.member[k]
-                : k == members && target.replaces >= 0
-                    ? target.replaces
-                    : static_cast<int>(otherBlobs.size() + appended++);
-    if (otherBlobs.size() + appended > otherBlobs.capacity() ||
-        markers_.size() + (count - members) > markers_.capacity())
+    std::array<bool, kMaxDiscs> placed{};
+    if (detectors_[other].splitOnLines(image.pixels, image.stride_bytes, target.blob, discs,
+                                       std::span(parts.data(), count),
+                                       std::span(placed.data(), count)) == 0)
         return false;
 
-    // Every disc with a partner is triangulated again from its new centre, each new one into a
-    // new marker; all must pass stereo's checks.
-    std::array<StereoMarker, kMaxDiscs> triangulated{};
-    for (std::size_t k = 0; k < count; ++k) {
-        if (source[k] < 0)
-            continue;
+    // Each placed disc with a partner is triangulated: a new one into a new marker, in the place
+    // of the blob it replaces or after the last; then, if one was, each member again from its
+    // new centre (it keeps its old one when that fails stereo's checks). A blob that gave no new
+    // marker keeps its centres: the scan found no disc hidden in it.
+    bool added = false;
+    const auto pairDisc = [&](std::size_t k) {
+        if (!placed[k] || source[k] < 0)
+            return;
+        const bool isMember = k < members;
+        const bool replacing = !isMember && !added && target.replaces >= 0;
+        if (!isMember && (markers_.size() == markers_.capacity() ||
+                          (!replacing && otherBlobs.size() == otherBlobs.capacity())))
+            return;
+        const int at = isMember    ? target.member[k]
+                       : replacing ? target.replaces
+                                   : static_cast<int>(otherBlobs.size());
         const Blob& partner = blobs_[own][static_cast<std::size_t>(source[k])];
-        const bool ok =
-            camera == 0
-                ? stereo_.triangulateBlobs(partner, source[k], parts[k], at[k], triangulated[k])
-                : stereo_.triangulateBlobs(parts[k], at[k], partner, source[k], triangulated[k]);
+        StereoMarker marker;
+        const bool ok = camera == 0
+                            ? stereo_.triangulateBlobs(partner, source[k], parts[k], at, marker)
+                            : stereo_.triangulateBlobs(parts[k], at, partner, source[k], marker);
         if (!ok)
-            return false;
-    }
-    for (std::size_t k = 0; k < count; ++k) {
-        if (source[k] < 0)
-            continue;
-        const auto place = static_cast<std::size_t>(at[k]);
-        if (k < members) {
+            return;
+        const auto place = static_cast<std::size_t>(at);
+        if (isMember) {
             otherBlobs[place] = parts[k];
-            markers_[static_cast<std::size_t>(markerOfBlob_[other][place])] = triangulated[k];
-            continue;
+            markers_[static_cast<std::size_t>(markerOfBlob_[other][place])] = marker;
+            return;
         }
-        if (place < otherBlobs.size())
+        if (replacing)
             otherBlobs[place] = parts[k];
         else
             otherBlobs.push_back(parts[k]);
-        markers_.push_back(triangulated[k]);
-        const int marker = static_cast<int>(markers_.size() - 1);
-        markerOfBlob_[own][static_cast<std::size_t>(source[k])] = marker;
-        markerOfBlob_[other][place] = marker;
-    }
-    return true;
+        markers_.push_back(marker);
+        markerOfBlob_[own][static_cast<std::size_t>(source[k])] =
+            static_cast<int>(markers_.size() - 1);
+        markerOfBlob_[other][place] = static_cast<int>(markers_.size() - 1);
+        added = true;
+    };
+    for (std::size_t k = members; k < count; ++k)
+        pairDisc(k);
+    for (std::size_t k = 0; k < members && added; ++k)
+        pairDisc(k);
+    return added;
 }
 
 std::span<const Vec3> MarkerPipeline::process(const std::uint8_t* pixels0, int stride0_bytes,

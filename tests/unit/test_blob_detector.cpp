@@ -479,7 +479,10 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
         discs[1].radius_px = radiusOfTwin(pair[1], 1);
         discs[1].known = false;
         std::array<Blob, 2> parts{};
-        ASSERT_TRUE(detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts))
+        std::array<bool, 2> placed{};
+        ASSERT_EQ(
+            detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts, placed),
+            2u)
             << "pair at " << pair[0].centre_px.transpose();
         for (std::size_t k = 0; k < 2; ++k) {
             const double error = (parts[k].centre_px - pair[k].centre_px).norm();
@@ -492,9 +495,10 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
     EXPECT_EQ(detector.counters().splitOnLines, 3u);
 }
 
-TEST(BlobDetector, RefusesADiscWithoutAnArcOfItsOwn) {
+TEST(BlobDetector, PlacesNoDiscWithoutAnArcOfItsOwn) {
     // A single disc has no second disc on a line through it, nor on a line that misses it; two
-    // touching discs have none on a line through the top of their blob.
+    // touching discs have none on a line through the top of their blob. The disc that is there
+    // is placed all the same: each is judged on its own arc.
     Image image(640, 480);
     drawSpots(image, {disc(100.3, 100.6, 6.0), disc(300.2, 200.4, 6.0), disc(306.9, 201.1, 6.0)});
     BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
@@ -505,16 +509,22 @@ TEST(BlobDetector, RefusesADiscWithoutAnArcOfItsOwn) {
     std::array<DiscOnLine, 2> discs{};
     discs[0].line = lineThrough({100.3, 100.6}, {1.0, 0.0}, 3.0);
     discs[0].start_px = single->centre_px;
-    discs[0].radius_px = 6.6;
+    discs[0].radius_px = std::sqrt(static_cast<double>(single->area_px) / 3.14159265358979323846);
     discs[1].line = lineThrough({100.0, 103.5}, {1.0, 0.0}, 3.0);
-    discs[1].radius_px = 6.6;
+    discs[1].radius_px = discs[0].radius_px;
     discs[1].known = false;
     std::array<Blob, 2> parts{};
-    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *single, discs, parts))
-        << "one disc";
+    std::array<bool, 2> placed{};
+    const auto split = [&](const Blob& blob) {
+        return detector.splitOnLines(image.pixels.data(), image.width, blob, discs, parts, placed);
+    };
+    EXPECT_EQ(split(*single), 1u);
+    EXPECT_TRUE(placed[0]);
+    EXPECT_FALSE(placed[1]) << "one disc";
+    EXPECT_LT((parts[0].centre_px - Vec2(100.3, 100.6)).norm(), 0.15);
     discs[1].line = lineThrough({100.0, 140.0}, {1.0, 0.0}, 3.0);
-    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *single, discs, parts))
-        << "a line beside the blob";
+    split(*single);
+    EXPECT_FALSE(placed[1]) << "a line beside the blob";
 
     // The two touching discs at 300 are split by detection; a line for one of them and another
     // through the blob's top rows, where no disc lies.
@@ -524,9 +534,8 @@ TEST(BlobDetector, RefusesADiscWithoutAnArcOfItsOwn) {
     discs[0].line = lineThrough({300.2, 200.4}, {1.0, 0.0}, 3.0);
     discs[0].start_px = left->centre_px;
     discs[1].line = lineThrough({303.0, 195.0}, {1.0, 0.0}, 3.0);
-    EXPECT_FALSE(detector.splitOnLines(image.pixels.data(), image.width, *left, discs, parts))
-        << "a line through no disc";
-    EXPECT_EQ(detector.counters().splitOnLines, 0u);
+    split(*left);
+    EXPECT_FALSE(placed[1]) << "a line through no disc";
 }
 
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
