@@ -85,29 +85,34 @@ void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images
         markerOfBlob_[0][static_cast<std::size_t>(markers_[m].blob0)] = static_cast<int>(m);
         markerOfBlob_[1][static_cast<std::size_t>(markers_[m].blob1)] = static_cast<int>(m);
     }
-    // Each blob with a partner, or each blob split into parts with partners, once: from its
-    // first part with a partner.
+    // Blobs with a partner first, each blob split into parts once (from its first part with a
+    // partner): their discs are markers already. Then blobs refused as not round, then blobs
+    // without a partner, which in a burst of reflections are many and mostly no marker's; the
+    // frame's budget of attempts goes to them last.
+    splitAttemptsLeft_ = kMaxSplitAttempts;
     for (int camera = 0; camera < 2; ++camera) {
         const std::size_t other = index(1 - camera);
         for (std::size_t b = 0; b < blobs_[other].size(); ++b) {
             const Blob& blob = blobs_[other][b];
-            if (blob.cut)
+            if (blob.cut || markerOfBlob_[other][b] < 0)
                 continue;
-            if (markerOfBlob_[other][b] < 0) {
-                // A blob without a partner that is one blob as detected: perhaps discs of two or
-                // more of this camera's unpaired blobs.
-                if (!blob.split)
-                    splitUnpaired(images[other], camera, Blob(blob), static_cast<int>(b));
-                continue;
-            }
             bool seen = false;
             for (std::size_t e = 0; e < b && !seen; ++e)
                 seen = markerOfBlob_[other][e] >= 0 && partsOfOneBlob(blobs_[other][e], blob);
             if (!seen)
                 splitWithUnpaired(images[other], camera, static_cast<int>(b));
         }
-        for (const Blob& refused : detectors_[other].refused())
-            splitUnpaired(images[other], camera, refused, -1);
+    }
+    for (int camera = 0; camera < 2; ++camera)
+        for (const Blob& refused : detectors_[index(1 - camera)].refused())
+            splitUnpaired(images[index(1 - camera)], camera, refused, -1);
+    for (int camera = 0; camera < 2; ++camera) {
+        const std::size_t other = index(1 - camera);
+        for (std::size_t b = 0; b < blobs_[other].size(); ++b) {
+            const Blob& blob = blobs_[other][b];
+            if (!blob.cut && !blob.split && markerOfBlob_[other][b] < 0)
+                splitUnpaired(images[other], camera, Blob(blob), static_cast<int>(b));
+        }
     }
 }
 
@@ -133,6 +138,10 @@ MarkerPipeline::epipolarLineNear(int camera, int blob, const Ray& otherRay) cons
 }
 
 void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int shared) {
+    if (splitAttemptsLeft_ == 0) {
+        ++splitAttemptsSkipped_;
+        return;
+    }
     const std::size_t own = index(camera), other = index(1 - camera);
     const BoundedVector<Blob>& otherBlobs = blobs_[other];
     const Blob& sharedBlob = otherBlobs[static_cast<std::size_t>(shared)];
@@ -234,6 +243,10 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
 
 void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blob& refused,
                                    int replaces) {
+    if (splitAttemptsLeft_ == 0) {
+        ++splitAttemptsSkipped_;
+        return;
+    }
     const std::size_t own = index(camera);
     const std::optional<Ray> ray = stereo_.rig().camera(1 - camera).ray(refused.centre_px);
     if (!ray)
@@ -319,11 +332,23 @@ bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Spli
     BoundedVector<Blob>& otherBlobs = blobs_[other];
     constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
     const std::size_t members = target.member.size(), count = discs.size();
+    if (splitAttemptsLeft_ == 0) {
+        ++splitAttemptsSkipped_;
+        return false;
+    }
+    --splitAttemptsLeft_;
     std::array<Blob, kMaxDiscs> parts{};
     std::array<bool, kMaxDiscs> placed{};
     if (detectors_[other].splitOnLines(image.pixels, image.stride_bytes, target.blob, discs,
                                        std::span(parts.data(), count),
                                        std::span(placed.data(), count)) == 0)
+        return false;
+
+    // A blob without a partner is no case for one new disc: stereo declined that pair already.
+    std::size_t placedNew = 0;
+    for (std::size_t k = members; k < count; ++k)
+        placedNew += placed[k] && source[k] >= 0 ? 1U : 0U;
+    if (placedNew < (members == 0 ? 2U : 1U))
         return false;
 
     // Each placed disc with a partner is triangulated: a new one into a new marker, in the place
@@ -395,6 +420,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
             detectors_[camera].counters().blobOverflow + blobs_[camera].overflowCount();
     }
     c.markerOverflow = stereo_.counters().markerOverflow;
+    c.splitAttemptsSkipped = splitAttemptsSkipped_;
     return c;
 }
 

@@ -34,6 +34,8 @@ struct MarkerPipelineCounters {
     std::uint64_t cutDiscs = 0;
     /// Blobs of two discs split on the epipolar lines of the other camera's separate blobs.
     std::uint64_t splitOnLines = 0;
+    /// Splits on epipolar lines not tried for want of the frame's budget (a burst of blobs).
+    std::uint64_t splitAttemptsSkipped = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;
@@ -178,6 +180,11 @@ private:
     BoundedVector<Vec3> points_rig_mm_;
     /// Per camera and blob, the index of the marker it is in (-1: none), during matchStereo().
     std::array<std::unique_ptr<int[]>, 2> markerOfBlob_;
+    /// Splits on epipolar lines tried a frame at most: a blob's fit takes tens of microseconds,
+    /// and a burst of reflections offers hundreds of blobs without a partner.
+    static constexpr std::size_t kMaxSplitAttempts = 24;
+    std::size_t splitAttemptsLeft_ = 0;
+    std::uint64_t splitAttemptsSkipped_ = 0;
     const char* error_ = nullptr;
 };
 

@@ -627,6 +627,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsNotSplit = refused.splitRefused;
     counters_.blobsCut = refused.cutDiscs;
     counters_.blobsSplitOnLines = refused.splitOnLines;
+    counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -733,6 +734,7 @@ std::string Firmware::statusReport() const {
     row("blobs not round, not split", c.blobsNotSplit);
     row("discs cut by an edge, centred by their arc", c.blobsCut);
     row("blobs split on the other camera's lines", c.blobsSplitOnLines);
+    row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

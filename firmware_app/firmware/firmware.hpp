@@ -80,8 +80,10 @@ struct FirmwareCounters {
     std::uint64_t blobsNotSplit = 0;
     /// Discs cut by an edge in front of them, centred by their visible arc.
     std::uint64_t blobsCut = 0;
-    /// Blobs split by stereo on the epipolar lines of the other camera's blobs.
+    /// Blobs split by stereo on the epipolar lines of the other camera's blobs, and splits not
+    /// tried for want of a frame's budget.
     std::uint64_t blobsSplitOnLines = 0;
+    std::uint64_t splitsOnLinesSkipped = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;
