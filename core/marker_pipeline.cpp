@@ -158,10 +158,8 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
     }
 
     // The unpaired blobs of this camera whose epipolar lines cross one of its discs at a
-    // disparity of the working volume: up to kMaxAdded, nearest a disc's row first.
-    constexpr std::size_t kMaxAdded = kMaxDiscs;
-    std::array<std::pair<double, int>, kMaxAdded> candidate{};
-    std::size_t candidates = 0;
+    // disparity of the working volume, nearest a disc's row first.
+    Candidates candidates;
     for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
         Ray ray;
         Vec2 rectified;
@@ -183,15 +181,9 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
         }
         if (!(off < std::numeric_limits<double>::infinity()))
             continue;
-        std::size_t at = std::min(candidates, kMaxAdded - 1);
-        if (candidates == kMaxAdded && off >= candidate[at].first)
-            continue;
-        for (; at > 0 && candidate[at - 1].first > off; --at)
-            candidate[at] = candidate[at - 1];
-        candidate[at] = {off, static_cast<int>(u)};
-        candidates = std::min(candidates + 1, kMaxAdded);
+        candidates.offer(off, static_cast<int>(u));
     }
-    if (candidates == 0)
+    if (candidates.count == 0)
         return;
 
     // Each part with a partner has its centre on the partner's epipolar line, and keeps its size
@@ -224,21 +216,8 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
             discs[k].radius_px =
                 near->scale * radiusOf(blobs_[own][static_cast<std::size_t>(source[k])]);
     }
-    // The unpaired blobs' discs, of unknown place on their lines: all of them, then fewer.
-    std::array<DiscOnLine, kMaxAdded> added{};
-    for (std::size_t a = 0; a < candidates; ++a) {
-        const std::optional<LineNear> near =
-            epipolarLineNear(camera, candidate[a].second, sharedRay);
-        if (!near)
-            return;
-        const Blob& blob = blobs_[own][static_cast<std::size_t>(candidate[a].second)];
-        added[a] = {near->line, Vec2::Zero(), near->scale * radiusOf(blob), false, false};
-    }
-    std::array<int, kMaxAdded> addedSource{};
-    for (std::size_t a = 0; a < candidates; ++a)
-        addedSource[a] = candidate[a].second;
-    trySplits(image, camera, {sharedBlob, std::span(member.data(), members), -1}, discs, source,
-              std::span(added.data(), candidates), std::span(addedSource.data(), candidates), 1);
+    trySplits(image, camera, {sharedBlob, std::span(member.data(), members), -1}, sharedRay, discs,
+              source, candidates, 1);
 }
 
 void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blob& refused,
@@ -255,12 +234,10 @@ void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blo
     if (!rectified)
         return;
     // The unpaired blobs of this camera whose epipolar lines cross the blob's rows at a disparity
-    // of the working volume: up to kMaxAdded, nearest its middle row first.
+    // of the working volume, nearest its middle row first.
     const double halfHeight = 0.5 * (refused.bottom - refused.top + 1);
     const double halfWidth = 0.5 * (refused.right - refused.left + 1);
-    constexpr std::size_t kMaxAdded = BlobDetector::kMaxLineDiscs;
-    std::array<std::pair<double, int>, kMaxAdded> candidate{};
-    std::size_t candidates = 0;
+    Candidates candidates;
     for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
         Ray unpairedRay;
         Vec2 unpairedRectified;
@@ -272,41 +249,45 @@ void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blo
                                              : rectified->x() - unpairedRectified.x();
         if (off > halfHeight + 1.0 || !stereo_.admissibleDisparity(disparity, halfWidth))
             continue;
-        std::size_t at = std::min(candidates, kMaxAdded - 1);
-        if (candidates == kMaxAdded && off >= candidate[at].first)
-            continue;
-        for (; at > 0 && candidate[at - 1].first > off; --at)
-            candidate[at] = candidate[at - 1];
-        candidate[at] = {off, static_cast<int>(u)};
-        candidates = std::min(candidates + 1, kMaxAdded);
+        candidates.offer(off, static_cast<int>(u));
     }
-    if (candidates < 2)
+    if (candidates.count < 2)
         return;
-    std::array<DiscOnLine, kMaxAdded> added{};
-    for (std::size_t a = 0; a < candidates; ++a) {
-        const std::optional<LineNear> near = epipolarLineNear(camera, candidate[a].second, *ray);
-        if (!near)
-            return;
-        const Blob& blob = blobs_[own][static_cast<std::size_t>(candidate[a].second)];
-        added[a] = {near->line, Vec2::Zero(), near->scale * radiusOf(blob), false, false};
-    }
-    std::array<DiscOnLine, kMaxAdded> discs{};
-    std::array<int, kMaxAdded> source{};
-    std::array<int, kMaxAdded> addedSource{};
-    for (std::size_t a = 0; a < candidates; ++a)
-        addedSource[a] = candidate[a].second;
-    trySplits(image, camera, {refused, {}, replaces}, discs, source,
-              std::span(added.data(), candidates), std::span(addedSource.data(), candidates), 2);
+    std::array<DiscOnLine, BlobDetector::kMaxLineDiscs> discs{};
+    std::array<int, BlobDetector::kMaxLineDiscs> source{};
+    trySplits(image, camera, {refused, {}, replaces}, *ray, discs, source, candidates, 2);
+}
+
+void MarkerPipeline::Candidates::offer(double off, int blob) {
+    std::size_t at = std::min(count, nearest.size() - 1);
+    if (count == nearest.size() && off >= nearest[at].first)
+        return;
+    for (; at > 0 && nearest[at - 1].first > off; --at)
+        nearest[at] = nearest[at - 1];
+    nearest[at] = {off, blob};
+    count = std::min(count + 1, nearest.size());
 }
 
 bool MarkerPipeline::trySplits(const ImageView& image, int camera, const SplitTarget& target,
-                               std::span<DiscOnLine> discs, std::span<int> source,
-                               std::span<const DiscOnLine> added, std::span<const int> addedSource,
+                               const Ray& targetRay, std::span<DiscOnLine> discs,
+                               std::span<int> source, const Candidates& candidates,
                                std::size_t minAdded) {
+    // The candidates' discs, of unknown place on their epipolar lines near the target.
+    const std::size_t own = index(camera);
+    std::array<DiscOnLine, BlobDetector::kMaxLineDiscs> added{};
+    for (std::size_t a = 0; a < candidates.count; ++a) {
+        const int blob = candidates.nearest[a].second;
+        const std::optional<LineNear> near = epipolarLineNear(camera, blob, targetRay);
+        if (!near)
+            return false;
+        added[a] = {near->line, Vec2::Zero(),
+                    near->scale * radiusOf(blobs_[own][static_cast<std::size_t>(blob)]), false,
+                    false};
+    }
     // Every added disc, then every one but one: a line of a blob whose disc is elsewhere (at
     // another depth) spoils the fit of all. The nearest lines are kept where room is short.
     const std::size_t members = target.member.size();
-    const std::size_t offered = std::min(added.size(), discs.size() - members);
+    const std::size_t offered = std::min(candidates.count, discs.size() - members);
     for (std::size_t attempt = 0; attempt <= offered; ++attempt) {
         // Attempt 0 leaves none out; attempt a leaves out added disc a - 1.
         const std::size_t skip = attempt == 0 ? offered : attempt - 1;
@@ -317,7 +298,7 @@ bool MarkerPipeline::trySplits(const ImageView& image, int camera, const SplitTa
         for (std::size_t a = 0; a < offered; ++a)
             if (a != skip) {
                 discs[at] = added[a];
-                source[at] = addedSource[a];
+                source[at] = candidates.nearest[a].second;
                 ++at;
             }
         if (splitAndPair(image, camera, target, discs.first(count), source.first(count)))

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <span>
+#include <utility>
 
 #include "core/blob_detector.hpp"
 #include "core/bounded_vector.hpp"
@@ -147,12 +148,20 @@ private:
     /// or refused by detection as not round (\a replaces -1), into the discs of two or more of
     /// this camera's unpaired blobs whose epipolar lines cross it.
     void splitUnpaired(const ImageView& image, int camera, const Blob& blob, int replaces);
-    /// Split \a target with \a discs (its members' filled in) and all of \a added, or all but
-    /// one, at least \a minAdded (see splitAndPair()); true on the first that pairs.
+    /// Unpaired blobs whose epipolar lines cross a blob to split: the nearest (by row offset)
+    /// first, as many as it can take discs.
+    struct Candidates {
+        std::array<std::pair<double, int>, BlobDetector::kMaxLineDiscs> nearest{};
+        std::size_t count = 0;
+        /// Blob \a blob, \a off rows off: kept when among the nearest.
+        void offer(double off, int blob);
+    };
+    /// Split \a target with \a discs (its members' filled in) and the discs of all the
+    /// \a candidates, or all but one, at least \a minAdded (see splitAndPair()); their lines are
+    /// taken near \a targetRay, the ray of the target's centre. True on the first that pairs.
     bool trySplits(const ImageView& image, int camera, const SplitTarget& target,
-                   std::span<DiscOnLine> discs, std::span<int> source,
-                   std::span<const DiscOnLine> added, std::span<const int> addedSource,
-                   std::size_t minAdded);
+                   const Ray& targetRay, std::span<DiscOnLine> discs, std::span<int> source,
+                   const Candidates& candidates, std::size_t minAdded);
     /// Split \a target into \a discs (its members' first), pair each with blob \a source of
     /// \a camera (-1: none) and triangulate; true, with blobs and markers updated, when every
     /// pair passes stereo's checks.
