@@ -963,6 +963,23 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         circle[k].radius = discs[k].radius_px;
     }
 
+    // A disc of unknown place must own some of the outline: points more than a pixel outside
+    // every disc already known. A blob that its known discs explain (one disc, with a line of
+    // another blob merely crossing it) is left as it is, before the costly scans.
+    bool anyKnown = false;
+    std::size_t outsideKnown = 0;
+    for (std::size_t k = 0; k < count; ++k)
+        anyKnown = anyKnown || discs[k].known || discs[k].fixed;
+    for (std::size_t i = 0; i < edges && anyKnown; ++i) {
+        bool outside = true;
+        for (std::size_t k = 0; k < count && outside; ++k)
+            outside = !(discs[k].known || discs[k].fixed) ||
+                      (edge[i] - circle[k].centre).norm() > circle[k].radius + 1.0;
+        outsideKnown += outside ? 1U : 0U;
+    }
+    if (anyKnown && outsideKnown < 5)
+        return 0;
+
     // Each movable centre's place on its line, first by scans over the blob's extent: a place is
     // scored by the outline points' robust residuals (squared, capped at 1 px^2), each point
     // taking the smallest of all circles'. A disc of unknown place is scanned together with the
