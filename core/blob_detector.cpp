@@ -527,13 +527,6 @@ Blob BlobDetector::roundBlob(const Moments& m) {
     return blob;
 }
 
-bool BlobDetector::restsOnArc(double rms_px, double radius_px, std::size_t points,
-                              const Vec2& resultant) {
-    const double share = resultant.norm() / static_cast<double>(std::max<std::size_t>(points, 1));
-    const bool covered = share < 0.7 || (share < kShortArcShare && rms_px <= kShortArcFitRms_px);
-    return points >= 8 && covered && rms_px <= kSplitFitRms_px && radius_px >= 1.0;
-}
-
 std::size_t BlobDetector::traceOutline(int left, int top, int right, int bottom, int seedX,
                                        int seedY, const std::uint8_t* pixels, int stride_bytes) {
     const int w = right - left + 1, h = bottom - top + 1;
@@ -672,9 +665,15 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
 
-    // See restsOnArc().
+    // A circle rests on its own outline points when they cover at least half of it (their unit
+    // vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83
+    // for a third) and fit it within kSplitFitRms_px, or cover a third of it and fit it within
+    // kShortArcFitRms_px: a disc with neighbours on several sides, or cut by an edge, keeps only
+    // a short arc of its own.
     const auto restsOnItsArc = [](const Circle& c, std::size_t n, const Vec2& resultant) {
-        return restsOnArc(c.rms, c.radius, n, resultant);
+        const double share = resultant.norm() / static_cast<double>(std::max<std::size_t>(n, 1));
+        const bool covered = share < 0.7 || (share < kShortArcShare && c.rms <= kShortArcFitRms_px);
+        return n >= 8 && covered && c.rms <= kSplitFitRms_px && c.radius >= 1.0;
     };
     // A disc of this blob centred by circle \a c (grid coordinates).
     const auto discBlob = [&](const Circle& c) {

@@ -183,13 +183,6 @@ private:
     /// the bounds are too large or touch the image's border.
     std::size_t traceOutline(int left, int top, int right, int bottom, int seedX, int seedY,
                              const std::uint8_t* pixels, int stride_bytes);
-    /// A circle rests on its own outline points when they cover at least half of it (their unit
-    /// vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83
-    /// for a third) and fit it within kSplitFitRms_px, or cover a third of it and fit it within
-    /// kShortArcFitRms_px: a disc with neighbours on several sides, or cut by an edge, keeps only
-    /// a short arc of its own.
-    static bool restsOnArc(double rms_px, double radius_px, std::size_t points,
-                           const Vec2& resultant);
     bool addCandidate(const Blob& blob, std::uint32_t order);
     /// A blob with the bounds and peak of component \a m, to be given its centre and shape.
     static Blob framedBlob(const Moments& m);
