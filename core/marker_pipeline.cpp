@@ -78,6 +78,29 @@ bool partsOfOneBlob(const Blob& a, const Blob& b) {
 }
 } // namespace
 
+template <typename Visit>
+void MarkerPipeline::forEachUnpaired(int camera, Visit visit) const {
+    const std::size_t own = index(camera);
+    for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
+        Ray ray;
+        Vec2 rectified;
+        if (markerOfBlob_[own][u] < 0 &&
+            stereo_.preparedBlob(camera, static_cast<int>(u), ray, rectified))
+            visit(static_cast<int>(u), rectified);
+    }
+}
+
+double MarkerPipeline::crossingOff(int camera, const Vec2& rectified_px,
+                                   const Vec2& targetRectified_px, double rowReach_px,
+                                   double disparityMargin_px) const {
+    const double off = std::abs(targetRectified_px.y() - rectified_px.y());
+    const double disparity = camera == 0 ? rectified_px.x() - targetRectified_px.x()
+                                         : targetRectified_px.x() - rectified_px.x();
+    return off <= rowReach_px && stereo_.admissibleDisparity(disparity, disparityMargin_px)
+               ? off
+               : std::numeric_limits<double>::infinity();
+}
+
 void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {
     for (std::size_t c = 0; c < 2; ++c)
         std::fill_n(markerOfBlob_[c].get(), blobs_[c].size(), -1);
@@ -160,12 +183,7 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
     // The unpaired blobs of this camera whose epipolar lines cross one of its discs at a
     // disparity of the working volume, nearest a disc's row first.
     Candidates candidates;
-    for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
-        Ray ray;
-        Vec2 rectified;
-        if (markerOfBlob_[own][u] >= 0 ||
-            !stereo_.preparedBlob(camera, static_cast<int>(u), ray, rectified))
-            continue;
+    forEachUnpaired(camera, [&](int u, const Vec2& rectified) {
         double off = std::numeric_limits<double>::infinity();
         for (std::size_t k = 0; k < members; ++k) {
             Ray partRay;
@@ -173,16 +191,11 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
             if (!stereo_.preparedBlob(1 - camera, member[k], partRay, partRectified))
                 continue;
             const double radius = radiusOf(otherBlobs[static_cast<std::size_t>(member[k])]);
-            const double rowOff = std::abs(partRectified.y() - rectified.y());
-            const double disparity =
-                camera == 0 ? rectified.x() - partRectified.x() : partRectified.x() - rectified.x();
-            if (rowOff <= radius + 1.0 && stereo_.admissibleDisparity(disparity, radius))
-                off = std::min(off, rowOff);
+            off =
+                std::min(off, crossingOff(camera, rectified, partRectified, radius + 1.0, radius));
         }
-        if (!(off < std::numeric_limits<double>::infinity()))
-            continue;
-        candidates.offer(off, static_cast<int>(u));
-    }
+        candidates.offer(off, u);
+    });
     if (candidates.count == 0)
         return;
 
@@ -226,7 +239,6 @@ void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blo
         ++splitAttemptsSkipped_;
         return;
     }
-    const std::size_t own = index(camera);
     const std::optional<Ray> ray = stereo_.rig().camera(1 - camera).ray(refused.centre_px);
     if (!ray)
         return;
@@ -238,19 +250,10 @@ void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blo
     const double halfHeight = 0.5 * (refused.bottom - refused.top + 1);
     const double halfWidth = 0.5 * (refused.right - refused.left + 1);
     Candidates candidates;
-    for (std::size_t u = 0; u < blobs_[own].size(); ++u) {
-        Ray unpairedRay;
-        Vec2 unpairedRectified;
-        if (markerOfBlob_[own][u] >= 0 ||
-            !stereo_.preparedBlob(camera, static_cast<int>(u), unpairedRay, unpairedRectified))
-            continue;
-        const double off = std::abs(unpairedRectified.y() - rectified->y());
-        const double disparity = camera == 0 ? unpairedRectified.x() - rectified->x()
-                                             : rectified->x() - unpairedRectified.x();
-        if (off > halfHeight + 1.0 || !stereo_.admissibleDisparity(disparity, halfWidth))
-            continue;
-        candidates.offer(off, static_cast<int>(u));
-    }
+    forEachUnpaired(camera, [&](int u, const Vec2& unpairedRectified) {
+        candidates.offer(
+            crossingOff(camera, unpairedRectified, *rectified, halfHeight + 1.0, halfWidth), u);
+    });
     if (candidates.count < 2)
         return;
     std::array<DiscOnLine, BlobDetector::kMaxLineDiscs> discs{};
@@ -259,6 +262,8 @@ void MarkerPipeline::splitUnpaired(const ImageView& image, int camera, const Blo
 }
 
 void MarkerPipeline::Candidates::offer(double off, int blob) {
+    if (!(off < std::numeric_limits<double>::infinity()))
+        return;
     std::size_t at = std::min(count, nearest.size() - 1);
     if (count == nearest.size() && off >= nearest[at].first)
         return;

@@ -148,12 +148,22 @@ private:
     /// or refused by detection as not round (\a replaces -1), into the discs of two or more of
     /// this camera's unpaired blobs whose epipolar lines cross it.
     void splitUnpaired(const ImageView& image, int camera, const Blob& blob, int replaces);
+    /// Call \a visit(blob, rectified position) for each blob of \a camera without a partner
+    /// that stereo could rectify.
+    template <typename Visit>
+    void forEachUnpaired(int camera, Visit visit) const;
+    /// How many rows (rectified px) a blob of \a camera at \a rectified_px lies off a target of
+    /// the other camera at \a targetRectified_px, when its epipolar line crosses the target
+    /// (within \a rowReach_px rows, at a disparity of the working volume give or take
+    /// \a disparityMargin_px); infinity otherwise.
+    double crossingOff(int camera, const Vec2& rectified_px, const Vec2& targetRectified_px,
+                       double rowReach_px, double disparityMargin_px) const;
     /// Unpaired blobs whose epipolar lines cross a blob to split: the nearest (by row offset)
     /// first, as many as it can take discs.
     struct Candidates {
         std::array<std::pair<double, int>, BlobDetector::kMaxLineDiscs> nearest{};
         std::size_t count = 0;
-        /// Blob \a blob, \a off rows off: kept when among the nearest.
+        /// Blob \a blob, \a off rows off: kept when among the nearest (never when infinite).
         void offer(double off, int blob);
     };
     /// Split \a target with \a discs (its members' filled in) and the discs of all the
