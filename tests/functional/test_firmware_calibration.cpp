@@ -15,6 +15,15 @@
 namespace edgetrack::app {
 namespace {
 
+// A DTrack latency is plausible below this (us): these tests check that it is sent where clients
+// read it, not how fast the loop runs (bench_firmware does). Under qemu or the sanitizers a frame
+// of the online calibration stage takes tens of milliseconds of the host's time.
+#ifdef EDGETRACK_SLOW_TARGET
+constexpr std::uint32_t kPlausibleLatency_us = 1'000'000;
+#else
+constexpr std::uint32_t kPlausibleLatency_us = 50'000;
+#endif
+
 TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
     auto sim = makeBoard("two_cubes", 7);
     LoopbackReceiver receiver;
@@ -121,7 +130,7 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
         EXPECT_EQ(frame.calibrated, 2u);
         ASSERT_TRUE(frame.ts2.has_value());
         EXPECT_GT(frame.ts2->latency_us, 0u);
-        EXPECT_LT(frame.ts2->latency_us, 50'000u);
+        EXPECT_LT(frame.ts2->latency_us, kPlausibleLatency_us);
         if (bothInView.contains(frame.frame)) {
             ++framesBothInView;
             withBoth += frame.bodies.size() == 2 ? 1u : 0u;
@@ -270,7 +279,8 @@ TEST(FirmwareOnSimBoard, AfterACalibrationADtrackClientShowsNoMarkersAndReadsThe
         for (const ParsedDtrack& frame : takeDtrack(*sim)) {
             client.receive(frame);
             ++datagrams;
-            if (client.latency_us && *client.latency_us > 0u && *client.latency_us < 50'000u)
+            if (client.latency_us && *client.latency_us > 0u &&
+                *client.latency_us < kPlausibleLatency_us)
                 ++withLatency;
             if (!sessionOver)
                 previewFrames += client.markers.empty() ? 0u : 1u;
