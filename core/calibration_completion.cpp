@@ -77,6 +77,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         ++counters_.seeds;
     }
 
+    linkPointTracks(session);
     // Bodies the online stage never made a model of: moving rigid sets of points no seed explains.
     trackAll(session);
     discoverBodies(session);

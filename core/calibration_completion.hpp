@@ -55,9 +55,6 @@ struct CompletionConfig {
     /// Fitted as one, every point lies within this of its marker (mm); also how close relative
     /// poses must come to start that fit.
     double sameBodyTolerance_mm = 2.0;
-    /// Relative poses found by carrying one piece's pose on at its speed until the other piece
-    /// comes into view agree within this (mm).
-    double handoverTolerance_mm = 4.0;
     /// Where the tracker needs four markers to find a body, three points pose it when their
     /// distances match one triangle of its layout within triangleTolerance_mm on each side, and no
     /// other triangle of any body comes within triangleUniqueness times that of this one; taken in
@@ -119,9 +116,9 @@ struct CompletionCounters {
     /// (four or more markers, or the one triangle they share) and they were never seen apart.
     std::uint64_t joinedByMotion = 0;
     std::uint64_t joinedByLayout = 0;
-    /// Objects never seen at once joined because one came into view as the other left, every
-    /// time by one relative pose.
-    std::uint64_t joinedByHandover = 0;
+    /// Objects joined because three or more of their markers were the same points, followed
+    /// from frame to frame from the one's poses to the other's.
+    std::uint64_t joinedByTracks = 0;
     /// Objects dropped for having fewer than minModelMarkers markers in the end.
     std::uint64_t dropped = 0;
     /// Objects not made models because too few of their markers were seen four at once for
@@ -206,6 +203,13 @@ private:
         /// Its markers refined by least squares over its poses (refine(), the body left as it
         /// is), set by joinBodies(): the layout by which pieces are registered on each other.
         std::vector<Vec3> refined_mm;
+        /// Point tracks (linkPointTracks) that sat at one place in its frame while it was posed,
+        /// by track: its markers, and points that rode on it.
+        struct TrackPlace {
+            std::uint32_t track = 0;
+            Vec3 place_mm = Vec3::Zero();
+        };
+        std::vector<TrackPlace> trackPlaces;
         /// Per marker: frames of the last refine() in which it was found with three others.
         std::vector<std::uint32_t> framesInFour;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
@@ -265,6 +269,16 @@ private:
     void follow(const SessionBuffer& session, Body& body);
     /// \return whether any were joined.
     bool joinBodies(const SessionBuffer& session);
+    /// \brief Every point of the session linked to the point it continues in the frame before,
+    /// where that is plain (mutual nearest to where its speed puts it, every other candidate far):
+    /// trackOf_ names each point's track.
+    void linkPointTracks(const SessionBuffer& session);
+    /// \brief Body::trackPlaces of \a body from its poses.
+    void placeTracks(const SessionBuffer& session, Body& body) const;
+    /// \brief b's frame to a's, when three or more point tracks, not on one line, sat at one
+    /// place in each piece's frame (one physical point, followed from one piece's poses to the
+    /// other's) and those places agree as one rigid layout.
+    std::optional<RigidTransform> tiedByTracks(const Body& a, const Body& b) const;
     struct OneBodyFit {
         /// b's frame to a's, refined by least squares over the frames that fit.
         RigidTransform T_into_from_from;
@@ -286,10 +300,6 @@ private:
     /// (each found alone): a likeness of two objects puts the one body in two places at once.
     bool movesOnSmoothly(const SessionBuffer& session, const Body& a, const Body& b,
                          const RigidTransform& T_a_from_b) const;
-    /// The relative pose (b's frame to a's) that every handover between \a a and \a b agrees
-    /// with, if there were enough.
-    std::optional<RigidTransform> relativePoseAcrossHandovers(const SessionBuffer& session,
-                                                              const Body& a, const Body& b) const;
     /// The place radius for \a body: three times the median distance of the points near its
     /// markers from them, within [siteRadius_mm, minMarkerSpacing_mm / 2].
     double placeRadiusOf(const SessionBuffer& session, const Body& body) const;
@@ -321,6 +331,9 @@ private:
     std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> sminLargest_;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
+    /// The session's points as one list (frame f's from frameFirst_[f]) and each one's track.
+    std::vector<std::size_t> frameFirst_;
+    std::vector<std::uint32_t> trackOf_;
     /// The place radius of the body being measured (mm).
     double placeRadius_mm_ = 1.5;
     /// Places hashed by the cell of their position: the first place of each of kSiteCells cells.

@@ -1,4 +1,4 @@
-// Completion, join step: pieces of one body found as one by motion, by layout or by handover.
+// Completion, join step: pieces of one body found as one by motion, by point tracks or by layout.
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -19,12 +19,6 @@ namespace {
 
 /// Relative poses tried as the consensus of two objects' motion.
 constexpr std::size_t kConsensusCandidates = 32;
-/// A body's pose is carried on across at most this many frames without either piece.
-constexpr std::size_t kHandoverGap_frames = 10;
-/// Frames over which a piece's speed and turn rate are measured before it leaves.
-constexpr std::size_t kSpeedBaseline_frames = 3;
-/// Handovers that must agree before two pieces that are never seen together are joined.
-constexpr std::size_t kMinHandovers = 3;
 /// Two models' markers are the same marker when one model registered onto the other puts them
 /// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
 /// four markers of one random layout already land on four of another by chance.
@@ -128,8 +122,10 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     // millimetre off (a ring's two pieces sharing five markers put two of them beyond the 0.5 mm
     // of a layout match: random_objects seed 6).
     for (Body& body : bodies_)
-        if (body.alive)
+        if (body.alive) {
             body.refined_mm = refinedMarkers(session, body);
+            placeTracks(session, body);
+        }
     std::vector<char> trackedAlone(alive, 0);
     auto trackAlone = [&](std::size_t b) {
         if (trackedAlone[b])
@@ -263,11 +259,11 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                         from.refined_mm, into.refined_mm, kRegistrationTolerance_mm,
                         kTriangleUniqueness * kRegistrationTolerance_mm, kTriangleComparisons);
                 };
-                // Or, never in view together, one piece of a turning body may come into view just
-                // as the other leaves: the pose of the one, carried on at its speed, then lands
-                // on the other's pose by one relative pose, every time it happens.
                 if ((T_into_from_from = lone.T_into_from_from))
                     ++counters_.joinedByMotion;
+                else if ((T_into_from_from = tiedByTracks(into, from)) &&
+                         movesOnSmoothly(session, into, from, *T_into_from_from))
+                    ++counters_.joinedByTracks;
                 else if ((T_into_from_from = layoutPlacement()))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from =
@@ -278,8 +274,6 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 else if ((T_into_from_from =
                               tieByLikeness([&] { return glimpsedPlacement(true); })))
                     ++counters_.joinedByLayout;
-                else if ((T_into_from_from = relativePoseAcrossHandovers(session, into, from)))
-                    ++counters_.joinedByHandover;
             }
             if (!T_into_from_from)
                 continue;
@@ -507,58 +501,6 @@ bool CalibrationCompletion::movesOnSmoothly(const SessionBuffer& session, const 
             }
         }
     return static_cast<double>(smooth) >= config_.sameBodyShare * static_cast<double>(handovers);
-}
-
-std::optional<RigidTransform>
-CalibrationCompletion::relativePoseAcrossHandovers(const SessionBuffer& session, const Body& a,
-                                                   const Body& b) const {
-    const std::size_t frames = session.frames();
-    const Extent ballA = extentOf(a.markers_mm);
-    const Extent ballB = extentOf(b.markers_mm);
-    std::vector<RigidTransform> estimates; // b's frame to a's
-    // The first pose of one body's stretch, and the other's last poses just before it.
-    auto handover = [&](const Body& first, const Body& second, const Extent& firstBall,
-                        bool firstIsA) {
-        for (std::size_t f = 1; f < frames; ++f) {
-            if (!second.posedAlone[f] || second.posedAlone[f - 1] || first.posedAlone[f])
-                continue;
-            std::size_t end = f; // the earlier body's last posed frame before f
-            for (std::size_t back = 1; back <= kHandoverGap_frames && back <= f; ++back)
-                if (first.posedAlone[f - back]) {
-                    end = f - back;
-                    break;
-                }
-            if (end == f || end < kSpeedBaseline_frames)
-                continue;
-            const std::size_t start = end - kSpeedBaseline_frames;
-            bool steady = true;
-            for (std::size_t g = start; g <= end; ++g)
-                steady = steady && first.posedAlone[g] != 0;
-            if (!steady)
-                continue;
-            const RigidTransform carried =
-                extrapolate(first.T_rig_from_body_alone[start], session.time_s(start),
-                            first.T_rig_from_body_alone[end], session.time_s(end),
-                            session.time_s(f), firstBall.centre);
-            const RigidTransform firstFromSecond =
-                carried.inverse() * second.T_rig_from_body_alone[f];
-            estimates.push_back(firstIsA ? firstFromSecond : firstFromSecond.inverse());
-        }
-    };
-    handover(a, b, ballA, true);
-    handover(b, a, ballB, false);
-    if (estimates.size() < kMinHandovers)
-        return std::nullopt;
-    const Agreement most = mostAgreed(estimates, ballB, config_.handoverTolerance_mm);
-    if (most.agree < kMinHandovers ||
-        static_cast<double>(most.agree) <
-            config_.sameBodyShare * static_cast<double>(estimates.size()))
-        return std::nullopt;
-    std::vector<RigidTransform> agreeing;
-    for (const RigidTransform& e : estimates)
-        if (disagreement_mm(e, estimates[most.index], ballB) <= config_.handoverTolerance_mm)
-            agreeing.push_back(e);
-    return meanTransform(agreeing, ballB);
 }
 
 } // namespace edgetrack

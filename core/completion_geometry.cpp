@@ -39,24 +39,6 @@ double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const E
            ball.radius_mm * rotationAngleBetween_rad(a.rotation, b.rotation);
 }
 
-RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball) {
-    Eigen::Vector4d q = Eigen::Vector4d::Zero();
-    Vec3 centre = Vec3::Zero();
-    const Quat& reference = transforms.front().rotation;
-    for (const RigidTransform& t : transforms) {
-        Eigen::Vector4d c = t.rotation.coeffs();
-        if (c.dot(reference.coeffs()) < 0.0)
-            c = -c;
-        q += c;
-        centre += t.apply(ball.centre);
-    }
-    RigidTransform mean;
-    mean.rotation = Quat(q.normalized());
-    centre /= static_cast<double>(transforms.size());
-    mean.translation_mm = centre - mean.rotation * ball.centre;
-    return mean;
-}
-
 Agreement mostAgreed(std::span<const RigidTransform> transforms, const Extent& ball,
                      double tolerance_mm, std::size_t step) {
     Agreement best;

@@ -29,10 +29,6 @@ Extent extentOf(std::span<const Vec3> markers_mm);
 /// How far apart two transforms put the points of a ball (centre, radius): an upper bound (mm).
 double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball);
 
-/// The mean of transforms that agree closely: mean rotation (sign-aligned quaternions) about the
-/// ball's centre, and the mean place of that centre.
-RigidTransform meanTransform(std::span<const RigidTransform> transforms, const Extent& ball);
-
 /// Which transform the most others come near, and how many come near it (itself included).
 struct Agreement {
     std::size_t index = 0;

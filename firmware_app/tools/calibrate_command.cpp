@@ -108,7 +108,7 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
     const CompletionCounters& k = session.completionCounters();
     summary << "  completion: " << session.seedsUsed() << " online models in, " << k.discovered
             << " bodies found in the points, " << k.rounds << " rounds; "
-            << k.joinedByMotion + k.joinedByLayout + k.joinedByHandover << " pieces joined, "
+            << k.joinedByMotion + k.joinedByTracks + k.joinedByLayout << " pieces joined, "
             << k.framesFollowed << " frames followed, " << k.framesFromTriangles
             << " posed from three markers, " << k.dropped << " dropped, " << k.droppedSeenBriefly
             << " seen too briefly; markers added " << k.markersAdded << ", removed "

@@ -490,29 +490,29 @@ int main(int argc, char** argv) {
                     online.strayModels, online.falseMarkers,
                     complete(online) ? "complete" : "incomplete");
         const CompletionCounters& k = completionCounters;
-        std::printf(
-            "completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
-            "followed, %llu posed from triangles, joined "
-            "%llu by motion, %llu by layout and %llu by handover, dropped %llu and %llu seen "
-            "too briefly, markers "
-            "added %llu and removed "
-            "%llu, overflow "
-            "sites/models/markers %llu/%llu/%llu\n",
-            completion_s, static_cast<unsigned long long>(k.seeds),
-            static_cast<unsigned long long>(k.discovered),
-            static_cast<unsigned long long>(k.rounds),
-            static_cast<unsigned long long>(k.framesFollowed),
-            static_cast<unsigned long long>(k.framesFromTriangles),
-            static_cast<unsigned long long>(k.joinedByMotion),
-            static_cast<unsigned long long>(k.joinedByLayout),
-            static_cast<unsigned long long>(k.joinedByHandover),
-            static_cast<unsigned long long>(k.dropped),
-            static_cast<unsigned long long>(k.droppedSeenBriefly),
-            static_cast<unsigned long long>(k.markersAdded),
-            static_cast<unsigned long long>(k.markersRemoved),
-            static_cast<unsigned long long>(k.siteOverflow),
-            static_cast<unsigned long long>(k.modelOverflow),
-            static_cast<unsigned long long>(k.markerOverflow));
+        std::printf("completion: %.2f s, %llu seeds, %llu discovered, %llu rounds, %llu frames "
+                    "followed, %llu posed from triangles, joined "
+                    "%llu by motion, %llu by tracks and %llu by layout, dropped "
+                    "%llu and %llu seen "
+                    "too briefly, markers "
+                    "added %llu and removed "
+                    "%llu, overflow "
+                    "sites/models/markers %llu/%llu/%llu\n",
+                    completion_s, static_cast<unsigned long long>(k.seeds),
+                    static_cast<unsigned long long>(k.discovered),
+                    static_cast<unsigned long long>(k.rounds),
+                    static_cast<unsigned long long>(k.framesFollowed),
+                    static_cast<unsigned long long>(k.framesFromTriangles),
+                    static_cast<unsigned long long>(k.joinedByMotion),
+                    static_cast<unsigned long long>(k.joinedByTracks),
+                    static_cast<unsigned long long>(k.joinedByLayout),
+                    static_cast<unsigned long long>(k.dropped),
+                    static_cast<unsigned long long>(k.droppedSeenBriefly),
+                    static_cast<unsigned long long>(k.markersAdded),
+                    static_cast<unsigned long long>(k.markersRemoved),
+                    static_cast<unsigned long long>(k.siteOverflow),
+                    static_cast<unsigned long long>(k.modelOverflow),
+                    static_cast<unsigned long long>(k.markerOverflow));
     }
     std::printf("models %zu (objects in scene %zu), stray models %zu, false markers %zu\n",
                 final.models, layouts.size(), final.strayModels, final.falseMarkers);

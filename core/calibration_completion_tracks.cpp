@@ -1,0 +1,225 @@
+// Completion, point tracks: the session's points linked frame to frame, and pieces tied by them.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/calibration_completion.hpp"
+#include "core/completion_geometry.hpp"
+#include "core/rigid_fit.hpp"
+
+namespace edgetrack {
+
+using namespace completion_detail;
+
+namespace {
+
+/// A point continues a point of the frame before when it lies within this of where that point's
+/// speed puts it (mm): a hand-held object moves a few millimetres a frame at 100 Hz.
+constexpr double kTrackGate_mm = 10.0;
+/// ...and every other candidate, on either side, lies at least this many times as far, and this
+/// much farther (mm): markers are 12 mm apart or more, so a link that is not plain is not made.
+constexpr double kTrackAmbiguityRatio = 2.0;
+constexpr double kTrackAmbiguityMargin_mm = 3.0;
+/// A track missing from fewer than this many frames in a row goes on where it reappears: a
+/// marker behind a passing finger, for longer than the tracker predicts a lost body.
+constexpr std::size_t kMaxTrackGap_frames = 11;
+/// A track sits at one place in a body's frame when the body was posed in this many of its
+/// frames and it lay within kTrackPlaceSpread_mm of its mean in each.
+constexpr std::size_t kMinPlaceFrames = 5;
+constexpr double kTrackPlaceSpread_mm = 1.0;
+/// Markers of two pieces tied by tracks lie, once the pieces are registered, within this of
+/// each other (mm): the layouts are refined over hundreds of poses.
+constexpr double kTrackTieTolerance_mm = 1.0;
+/// The markers that tie two pieces must fix the turn about any line through them: their widest
+/// triangle is at least this tall over its longest side (mm).
+constexpr double kMinTieHeight_mm = 5.0;
+
+/// The height (mm) of the tallest triangle of \a points over its longest side.
+double widestTriangleHeight_mm(std::span<const Vec3> points) {
+    double best = 0.0;
+    for (std::size_t i = 0; i < points.size(); ++i)
+        for (std::size_t j = i + 1; j < points.size(); ++j)
+            for (std::size_t k = j + 1; k < points.size(); ++k) {
+                const Vec3 ab = points[j] - points[i];
+                const Vec3 ac = points[k] - points[i];
+                const Vec3 bc = points[k] - points[j];
+                const double longest = std::max({ab.norm(), ac.norm(), bc.norm()});
+                if (longest <= 0.0)
+                    continue;
+                best = std::max(best, ab.cross(ac).norm() / longest);
+            }
+    return best;
+}
+
+} // namespace
+
+void CalibrationCompletion::linkPointTracks(const SessionBuffer& session) {
+    const std::size_t frames = session.frames();
+    frameFirst_.assign(frames + 1, 0);
+    for (std::size_t f = 0; f < frames; ++f)
+        frameFirst_[f + 1] = frameFirst_[f] + session.points(f).size();
+    trackOf_.assign(frameFirst_[frames], 0);
+    // Where each track was last seen, and how far it moved a frame then.
+    struct TrackEnd {
+        Vec3 at_mm;
+        Vec3 step_mm;
+        std::size_t frame;
+        std::uint32_t track;
+    };
+    std::vector<TrackEnd> ends, kept;
+    std::vector<Vec3> predicted;
+    std::vector<std::int32_t> bestOfEnd, bestOfPoint;
+    std::vector<double> endBest, endSecond, pointBest, pointSecond;
+    std::vector<char> continued;
+    constexpr double kFar = std::numeric_limits<double>::infinity();
+    std::uint32_t nextTrack = 0;
+    auto plain = [](double best, double second) {
+        return best <= kTrackGate_mm && second >= kTrackAmbiguityRatio * best &&
+               second >= best + kTrackAmbiguityMargin_mm;
+    };
+    for (std::size_t f = 0; f < frames; ++f) {
+        const std::span<const Vec3> points = session.points(f);
+        predicted.resize(ends.size());
+        for (std::size_t e = 0; e < ends.size(); ++e)
+            predicted[e] = ends[e].at_mm + ends[e].step_mm * static_cast<double>(f - ends[e].frame);
+        // Mutual nearest, plainly nearer than every other candidate on both sides.
+        bestOfEnd.assign(ends.size(), -1);
+        endBest.assign(ends.size(), kFar);
+        endSecond.assign(ends.size(), kFar);
+        bestOfPoint.assign(points.size(), -1);
+        pointBest.assign(points.size(), kFar);
+        pointSecond.assign(points.size(), kFar);
+        for (std::size_t j = 0; j < points.size(); ++j)
+            for (std::size_t e = 0; e < ends.size(); ++e) {
+                const double d = (points[j] - predicted[e]).norm();
+                if (d < pointBest[j]) {
+                    pointSecond[j] = pointBest[j];
+                    pointBest[j] = d;
+                    bestOfPoint[j] = static_cast<std::int32_t>(e);
+                } else if (d < pointSecond[j]) {
+                    pointSecond[j] = d;
+                }
+                if (d < endBest[e]) {
+                    endSecond[e] = endBest[e];
+                    endBest[e] = d;
+                    bestOfEnd[e] = static_cast<std::int32_t>(j);
+                } else if (d < endSecond[e]) {
+                    endSecond[e] = d;
+                }
+            }
+        kept.clear();
+        continued.assign(ends.size(), 0);
+        for (std::size_t j = 0; j < points.size(); ++j) {
+            const std::int32_t e = bestOfPoint[j];
+            const auto ue = static_cast<std::size_t>(e);
+            TrackEnd next{points[j], Vec3::Zero(), f, 0};
+            if (e >= 0 && bestOfEnd[ue] == static_cast<std::int32_t>(j) &&
+                plain(pointBest[j], pointSecond[j]) && plain(endBest[ue], endSecond[ue])) {
+                next.track = ends[ue].track;
+                next.step_mm =
+                    (points[j] - ends[ue].at_mm) / static_cast<double>(f - ends[ue].frame);
+                continued[ue] = 1;
+            } else {
+                next.track = nextTrack++;
+            }
+            trackOf_[frameFirst_[f] + j] = next.track;
+            kept.push_back(next);
+        }
+        // A track missing from a few frames may still be continued (a marker behind a finger).
+        for (std::size_t e = 0; e < ends.size(); ++e)
+            if (!continued[e] && f + 1 - ends[e].frame < kMaxTrackGap_frames)
+                kept.push_back(ends[e]);
+        ends.swap(kept);
+    }
+}
+
+void CalibrationCompletion::placeTracks(const SessionBuffer& session, Body& body) const {
+    // Every point within reach of the body, in its frame, by track.
+    std::vector<std::pair<std::uint32_t, Vec3>> seen;
+    const Extent ball = extentOf(body.markers_mm);
+    const double reach2 = (ball.radius_mm + config_.reach_mm) * (ball.radius_mm + config_.reach_mm);
+    for (std::size_t f = 0; f < session.frames(); ++f) {
+        if (!body.posed[f])
+            continue;
+        const std::span<const Vec3> points = session.points(f);
+        const RigidTransform bodyFromRig = body.T_rig_from_body[f].inverse();
+        for (std::size_t i = 0; i < points.size(); ++i) {
+            const Vec3 q = bodyFromRig.apply(points[i]);
+            if ((q - ball.centre).squaredNorm() <= reach2)
+                seen.emplace_back(trackOf_[frameFirst_[f] + i], q);
+        }
+    }
+    std::stable_sort(seen.begin(), seen.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    body.trackPlaces.clear();
+    for (std::size_t i = 0; i < seen.size();) {
+        std::size_t j = i;
+        Vec3 sum = Vec3::Zero();
+        for (; j < seen.size() && seen[j].first == seen[i].first; ++j)
+            sum += seen[j].second;
+        const std::size_t n = j - i;
+        const Vec3 mean = sum / static_cast<double>(n);
+        double worst2 = 0.0;
+        for (std::size_t k = i; k < j; ++k)
+            worst2 = std::max(worst2, (seen[k].second - mean).squaredNorm());
+        // A track that sat at one place in the body's frame: one of its markers, or a point
+        // riding on it for a while.
+        if (n >= kMinPlaceFrames && worst2 <= kTrackPlaceSpread_mm * kTrackPlaceSpread_mm)
+            body.trackPlaces.push_back({seen[i].first, mean});
+        i = j;
+    }
+}
+
+std::optional<RigidTransform> CalibrationCompletion::tiedByTracks(const Body& a,
+                                                                  const Body& b) const {
+    // Places of one track in both frames: one physical point, seen from both pieces' poses.
+    struct Tie {
+        Vec3 in_a_mm, in_b_mm;
+    };
+    std::vector<Tie> ties;
+    const auto& pa = a.trackPlaces;
+    const auto& pb = b.trackPlaces;
+    for (std::size_t i = 0, j = 0; i < pa.size() && j < pb.size();) {
+        if (pa[i].track < pb[j].track)
+            ++i;
+        else if (pb[j].track < pa[i].track)
+            ++j;
+        else {
+            ties.push_back({pa[i].place_mm, pb[j].place_mm});
+            ++i;
+            ++j;
+        }
+    }
+    // Trimmed: the worst tie dropped while any lies off the fit (a track that jumped to
+    // another marker in a frame it was not plain).
+    std::vector<Vec3> from, to;
+    while (ties.size() >= 3) {
+        from.clear();
+        to.clear();
+        for (const Tie& t : ties) {
+            from.push_back(t.in_b_mm);
+            to.push_back(t.in_a_mm);
+        }
+        const std::optional<RigidFit> fit = fitRigid(from, to);
+        if (!fit)
+            return std::nullopt;
+        std::size_t worst = 0;
+        double worstResidual = -1.0;
+        for (std::size_t k = 0; k < ties.size(); ++k) {
+            const double r = (fit->transform.apply(from[k]) - to[k]).norm();
+            if (r > worstResidual) {
+                worstResidual = r;
+                worst = k;
+            }
+        }
+        if (worstResidual <= kTrackTieTolerance_mm) {
+            if (widestTriangleHeight_mm(from) < kMinTieHeight_mm)
+                return std::nullopt;
+            return fit->transform;
+        }
+        ties.erase(ties.begin() + static_cast<std::ptrdiff_t>(worst));
+    }
+    return std::nullopt;
+}
+
+} // namespace edgetrack
