@@ -221,6 +221,7 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
     summary.blobOverflow = refused.blobOverflow;
     summary.rejectedNotRound = refused.rejectedNotRound;
     summary.splitBlobs = refused.splitBlobs;
+    summary.splitOnLines = refused.splitOnLines;
     summary.markerOverflow = refused.markerOverflow;
     return summary;
 }

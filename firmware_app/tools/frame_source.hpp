@@ -37,6 +37,8 @@ struct FrameSourceSummary {
     std::uint64_t points = 0;
     std::uint64_t rejectedNotRound = 0;
     std::uint64_t splitBlobs = 0;
+    /// Blobs split again on the other camera's epipolar lines (MarkerPipelineCounters).
+    std::uint64_t splitOnLines = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t markerOverflow = 0;
     /// The recording's rig.toml, when it has one (a .c3d file has none).

@@ -72,8 +72,9 @@ Status runReconstruct(const ReconstructOptions& options, std::ostream& summary) 
     summary << "edgetrack reconstruct: " << read->frames << " frames from " << read->level << ", "
             << blobRows.size() << " blobs, " << pointRows.size() << " markers; rejected blobs "
             << read->rejectedNotRound << " not round (" << read->splitBlobs
-            << " of them split into their discs); blob overflow " << read->blobOverflow
-            << ", marker overflow " << read->markerOverflow << "\n"
+            << " of them split into their discs); " << read->splitOnLines
+            << " blobs split on the other camera's epipolar lines; blob overflow "
+            << read->blobOverflow << ", marker overflow " << read->markerOverflow << "\n"
             << "  settings: " << options.settings.source << "\n";
     return Ok{};
 }

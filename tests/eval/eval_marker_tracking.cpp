@@ -386,6 +386,11 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(sc.blockOverflow),
                 static_cast<unsigned long long>(sc.rejectedRayGap),
                 static_cast<unsigned long long>(sc.rejectedReprojection));
+    const MarkerPipelineCounters pc = pipeline.counters();
+    std::printf("  blobs split on the other camera's epipolar lines (both cameras): %llu; splits "
+                "not tried for the frame's budget: %llu\n",
+                static_cast<unsigned long long>(pc.splitOnLines),
+                static_cast<unsigned long long>(pc.splitAttemptsSkipped));
     const BlobCounters& bc = pipeline.detector(0).counters();
     std::printf("  blobs (camera 0): accepted %llu, not round %llu (cut discs %llu), small %llu, "
                 "large %llu\n",
