@@ -67,54 +67,51 @@ void CalibrationCompletion::linkPointTracks(const SessionBuffer& session) {
         std::uint32_t track;
     };
     std::vector<TrackEnd> ends, kept;
-    std::vector<Vec3> predicted;
-    std::vector<std::int32_t> bestOfEnd, bestOfPoint;
-    std::vector<double> endBest, endSecond, pointBest, pointSecond;
-    std::vector<char> continued;
-    constexpr double kFar = std::numeric_limits<double>::infinity();
-    std::uint32_t nextTrack = 0;
-    auto plain = [](double best, double second) {
-        return best <= kTrackGate_mm && second >= kTrackAmbiguityRatio * best &&
-               second >= best + kTrackAmbiguityMargin_mm;
+    // The nearest candidate and how far the next lies.
+    struct TwoNearest {
+        double best = std::numeric_limits<double>::infinity();
+        double second = std::numeric_limits<double>::infinity();
+        std::int32_t index = -1;
+        void offer(double d, std::size_t i) {
+            if (d < best) {
+                second = best;
+                best = d;
+                index = static_cast<std::int32_t>(i);
+            } else if (d < second) {
+                second = d;
+            }
+        }
+        bool plain() const {
+            return best <= kTrackGate_mm && second >= kTrackAmbiguityRatio * best &&
+                   second >= best + kTrackAmbiguityMargin_mm;
+        }
     };
+    std::vector<Vec3> predicted;
+    std::vector<TwoNearest> ofEnd, ofPoint;
+    std::vector<char> continued;
+    std::uint32_t nextTrack = 0;
     for (std::size_t f = 0; f < frames; ++f) {
         const std::span<const Vec3> points = session.points(f);
         predicted.resize(ends.size());
         for (std::size_t e = 0; e < ends.size(); ++e)
             predicted[e] = ends[e].at_mm + ends[e].step_mm * static_cast<double>(f - ends[e].frame);
         // Mutual nearest, plainly nearer than every other candidate on both sides.
-        bestOfEnd.assign(ends.size(), -1);
-        endBest.assign(ends.size(), kFar);
-        endSecond.assign(ends.size(), kFar);
-        bestOfPoint.assign(points.size(), -1);
-        pointBest.assign(points.size(), kFar);
-        pointSecond.assign(points.size(), kFar);
+        ofEnd.assign(ends.size(), TwoNearest{});
+        ofPoint.assign(points.size(), TwoNearest{});
         for (std::size_t j = 0; j < points.size(); ++j)
             for (std::size_t e = 0; e < ends.size(); ++e) {
                 const double d = (points[j] - predicted[e]).norm();
-                if (d < pointBest[j]) {
-                    pointSecond[j] = pointBest[j];
-                    pointBest[j] = d;
-                    bestOfPoint[j] = static_cast<std::int32_t>(e);
-                } else if (d < pointSecond[j]) {
-                    pointSecond[j] = d;
-                }
-                if (d < endBest[e]) {
-                    endSecond[e] = endBest[e];
-                    endBest[e] = d;
-                    bestOfEnd[e] = static_cast<std::int32_t>(j);
-                } else if (d < endSecond[e]) {
-                    endSecond[e] = d;
-                }
+                ofPoint[j].offer(d, e);
+                ofEnd[e].offer(d, j);
             }
         kept.clear();
         continued.assign(ends.size(), 0);
         for (std::size_t j = 0; j < points.size(); ++j) {
-            const std::int32_t e = bestOfPoint[j];
+            const std::int32_t e = ofPoint[j].index;
             const auto ue = static_cast<std::size_t>(e);
             TrackEnd next{points[j], Vec3::Zero(), f, 0};
-            if (e >= 0 && bestOfEnd[ue] == static_cast<std::int32_t>(j) &&
-                plain(pointBest[j], pointSecond[j]) && plain(endBest[ue], endSecond[ue])) {
+            if (e >= 0 && ofEnd[ue].index == static_cast<std::int32_t>(j) && ofPoint[j].plain() &&
+                ofEnd[ue].plain()) {
                 next.track = ends[ue].track;
                 next.step_mm =
                     (points[j] - ends[ue].at_mm) / static_cast<double>(f - ends[ue].frame);
