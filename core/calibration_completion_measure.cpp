@@ -3,6 +3,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <numeric>
 #include <optional>
@@ -37,6 +38,11 @@ constexpr std::uint32_t kMinGlimpseFrames = 5;
 /// was there in at least this share of at least kMinPasses passes.
 constexpr std::uint32_t kMinPasses = 3;
 constexpr double kPassShare = 2.0 / 3.0;
+/// A place is a marker only when the body carried it, while it was seen there, farther through
+/// the rig than this many place radii: a point that stands still in the rig (a glint, a screw
+/// head) sits at one place of a body's frame too while the body keeps still, but never when it
+/// moves farther than the place radius.
+constexpr double kMinTravelInRadii = 4.0;
 
 } // namespace
 
@@ -212,6 +218,9 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
         bool seenInThis = false;
     };
     std::vector<Passes> passes(n);
+    // Where in the rig each place was while it was seen there: the box its positions span.
+    std::vector<Vec3> lowest(n, Vec3::Constant(std::numeric_limits<double>::infinity()));
+    std::vector<Vec3> highest(n, Vec3::Constant(-std::numeric_limits<double>::infinity()));
     const auto passGap = static_cast<std::size_t>(std::ceil(kPassGap_s * frameRate_hz_));
     for (int pass = 0; pass < 2; ++pass) {
         for (std::size_t f = 0; f < frames; ++f) {
@@ -232,6 +241,8 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
                     if (!isHit)
                         continue;
                     ++seen[k];
+                    lowest[k] = lowest[k].cwiseMin(there);
+                    highest[k] = highest[k].cwiseMax(there);
                     hitNow.push_back(k);
                     keepViewDirection(directions, view, thinning);
                     continue;
@@ -258,7 +269,8 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     }
     std::vector<std::size_t> accepted;
     for (std::size_t k = 0; k < n; ++k) {
-        if (seen[k] < minHits)
+        if (seen[k] < minHits ||
+            (highest[k] - lowest[k]).norm() < kMinTravelInRadii * placeRadius_mm_)
             continue;
         // Seen whenever the cameras look at it as before: in minSeenShare of those frames, or,
         // for a marker at the edge of its view (one camera sees it, the other not) or often

@@ -576,6 +576,40 @@ TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.05);
 }
 
+// A glint that stands still in the rig (a screw head, a watch) sits at one place of the body's
+// frame for the 0.6 s the body is held still, and the body is never seen from there again in the
+// session: by time and by the share of frames that look at it, it would be a marker. It is none:
+// the body never carried it anywhere, while every marker travels with the body.
+TEST(CalibrationCompletion, LeavesOutAGlintThatStoodStillWhileTheBodyDid) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
+    const std::size_t frames = 400;
+    SessionBuffer session(frames, frames * 16);
+    std::mt19937 random(6);
+    std::normal_distribution<double> noise(0.0, 0.05);
+    // Held still from 1.0 s to 1.6 s: the pose of 1.0 s, then on as if no time had passed.
+    auto poseAt = [](double t) {
+        return turning(t < 1.0 ? t : std::max(1.0, t - 0.6), Vec3(0.0, 0.0, 600.0), 0.0);
+    };
+    const Vec3 glint_rig_mm = poseAt(1.0).apply(Vec3(55.0, 10.0, -5.0));
+    std::vector<Vec3> points;
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        const RigidTransform pose = poseAt(t);
+        points.clear();
+        for (const Vec3& m : body)
+            points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
+        points.push_back(glint_rig_mm + Vec3(noise(random), noise(random), noise(random)));
+        session.append(t, points);
+    }
+    const CompletionConfig config;
+    ASSERT_LT(config.minSeen_s, 0.6) << "the glint is seen long enough to be a marker by time";
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({body}), out), 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), body.size());
+    EXPECT_LT(layoutError_mm(out[0], body), 0.05);
+}
+
 // A marker at the edge of its view, or often behind a passing hand: whenever the turning body
 // shows it to the cameras it is there in only every fourth frame, a quarter of the frames that
 // look at it as it was seen. It is there in every pass, so it is a marker, unlike a point that
