@@ -132,27 +132,43 @@ void BM_OpenCvPair(benchmark::State& state) {
 BENCHMARK(BM_OpenCvPair)->Unit(benchmark::kMicrosecond);
 #endif
 
+// A run of consecutive frame pairs of a simulated scene, rendered once: images 2f and 2f + 1
+// are frame f's two cameras.
+struct FrameRun {
+    sim::World world;
+    std::vector<std::vector<std::uint8_t>> images;
+
+    FrameRun(const char* sceneName, std::uint64_t firstFrame, std::size_t frames)
+        : world(*sim::makeScene(sceneName, 1), 1) {
+        const sim::RigSpec& rig = world.scene().rig;
+        const sim::FrameRenderer renderer(rig.width_px, rig.height_px, world.scene().background_dn,
+                                          world.scene().noiseSigma_dn, 1);
+        sim::Observation observation;
+        for (std::size_t f = 0; f < frames; ++f) {
+            world.observe(firstFrame + f, observation);
+            for (int c = 0; c < 2; ++c) {
+                images.emplace_back(static_cast<std::size_t>(rig.width_px * rig.height_px));
+                renderer.render(images.back(), rig.width_px, c, observation, 1.0, firstFrame + f);
+            }
+        }
+    }
+    int width_px() const { return world.scene().rig.width_px; }
+};
+
 // Stereo and frame-to-frame correspondence of the crowd scene (six objects, 60-70 markers) over
 // consecutive frames, so that the frame-to-frame prediction sees the motion it is made for; the
 // sequence repeats with the tracker reset, as after a pause.
 void BM_StereoAndFrameToFrame(benchmark::State& state) {
     constexpr std::uint64_t kFirstFrame = 650;
     constexpr std::size_t kFrames = 32;
-    const sim::World world(*sim::makeScene("crowd", 1), 1);
+    const FrameRun run("crowd", kFirstFrame, kFrames);
+    const sim::World& world = run.world;
     const sim::RigSpec& rig = world.scene().rig;
-    const sim::FrameRenderer renderer(rig.width_px, rig.height_px, world.scene().background_dn,
-                                      world.scene().noiseSigma_dn, 1);
     BlobDetector detector(BlobDetectorConfig{}, rig.width_px, rig.height_px);
-    std::vector<std::uint8_t> image(static_cast<std::size_t>(rig.width_px * rig.height_px));
     std::vector<BoundedVector<Blob>> blobs;
-    sim::Observation observation;
-    for (std::size_t f = 0; f < kFrames; ++f) {
-        world.observe(kFirstFrame + f, observation);
-        for (int c = 0; c < 2; ++c) {
-            renderer.render(image, rig.width_px, c, observation, 1.0, kFirstFrame + f);
-            blobs.emplace_back(256);
-            detector.detect(image.data(), rig.width_px, blobs.back());
-        }
+    for (const std::vector<std::uint8_t>& image : run.images) {
+        blobs.emplace_back(256);
+        detector.detect(image.data(), rig.width_px, blobs.back());
     }
     StereoMatcher stereo(world.rig(), StereoConfig{}, 256);
     MarkerTracker tracker{FrameToFrameConfig{}};
@@ -184,28 +200,19 @@ BENCHMARK(BM_StereoAndFrameToFrame)->Unit(benchmark::kMicrosecond);
 void BM_FrontEndTouching(benchmark::State& state) {
     constexpr std::uint64_t kFirstFrame = 300;
     constexpr std::size_t kFrames = 32;
-    const sim::World world(*sim::makeScene("touching", 1), 1);
-    const sim::RigSpec& rig = world.scene().rig;
-    const sim::FrameRenderer renderer(rig.width_px, rig.height_px, world.scene().background_dn,
-                                      world.scene().noiseSigma_dn, 1);
-    std::vector<std::vector<std::uint8_t>> images;
-    sim::Observation observation;
-    for (std::size_t f = 0; f < kFrames; ++f) {
-        world.observe(kFirstFrame + f, observation);
-        for (int c = 0; c < 2; ++c) {
-            images.emplace_back(static_cast<std::size_t>(rig.width_px * rig.height_px));
-            renderer.render(images.back(), rig.width_px, c, observation, 1.0, kFirstFrame + f);
-        }
-    }
+    const FrameRun run("touching", kFirstFrame, kFrames);
+    const sim::World& world = run.world;
+    const std::vector<std::vector<std::uint8_t>>& images = run.images;
+    const int width_px = run.width_px();
     MarkerPipeline pipeline(world.rig(), MarkerPipelineConfig{});
     const bool lines = state.range(0) != 0;
     std::size_t frame = 0, markerCount = 0;
     for (auto _ : state) {
         const std::size_t f = frame % kFrames;
         const std::array<ImageView, 2> views{
-            {{images[2 * f].data(), rig.width_px}, {images[2 * f + 1].data(), rig.width_px}}};
+            {{images[2 * f].data(), width_px}, {images[2 * f + 1].data(), width_px}}};
         for (int c = 0; c < 2; ++c)
-            pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, rig.width_px);
+            pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, width_px);
         pipeline.matchStereo(StereoMethod::Svd, lines ? views : std::array<ImageView, 2>{});
         benchmark::DoNotOptimize(pipeline.points_rig_mm().data());
         markerCount += pipeline.markers().size();
