@@ -1,18 +1,22 @@
-// Per-frame cost of object calibration: three 30-marker cubes turned in front of the rig.
+// Cost of object calibration: three 30-marker cubes, and the crowd of six objects (75 markers in
+// view), turned in front of the rig.
 //
 //   bench_calibration [--benchmark_repetitions=5]
 //
-// BM_CalibrationFrame is the typical frame once the models have formed; BM_CalibrationSession
-// runs whole 30-s sessions from an empty calibration and reports the mean, 99th percentile and
-// worst frame (the worst is the start, when every marker in view is one object and the clustering
-// works on its densest graph).
+// BM_CalibrationFrame is the online stage's typical frame once the models have formed;
+// BM_CalibrationSession runs whole 30-s sessions from an empty calibration and reports the mean,
+// 99th percentile and worst frame (the worst is the start, when every marker in view is one object
+// and the clustering works on its densest graph); BM_Completion is the completion stage of a 30-s
+// session, which runs once when the session ends, off the frame loop.
 #include <algorithm>
 #include <chrono>
 #include <optional>
+#include <string_view>
 #include <vector>
 
 #include <benchmark/benchmark.h>
 
+#include "core/calibration_session.hpp"
 #include "core/object_calibrator.hpp"
 #include "hal/sim/levels.hpp"
 #include "hal/sim/world.hpp"
@@ -28,26 +32,30 @@ struct Recording {
     std::vector<std::vector<Vec3>> points;
 };
 
-const Recording& threeCubes() {
-    static const Recording recording = [] {
-        std::optional<sim::Scene> scene = sim::makeScene("three_cubes", 1);
-        const sim::World world(std::move(*scene), 1);
-        sim::Random random(7);
-        sim::Observation observation;
-        Recording r;
-        for (std::size_t f = 0; f < kFrames; ++f) {
-            world.observe(f, observation);
-            r.time_s.push_back(observation.time_s);
-            r.points.emplace_back();
-            sim::pointsFromObservation(observation, sim::LevelNoise{}, random, r.points.back());
-        }
-        return r;
-    }();
-    return recording;
+Recording record(const char* sceneName) {
+    std::optional<sim::Scene> scene = sim::makeScene(sceneName, 1);
+    const sim::World world(std::move(*scene), 1);
+    sim::Random random(7);
+    sim::Observation observation;
+    Recording r;
+    for (std::size_t f = 0; f < kFrames; ++f) {
+        world.observe(f, observation);
+        r.time_s.push_back(observation.time_s);
+        r.points.emplace_back();
+        sim::pointsFromObservation(observation, sim::LevelNoise{}, random, r.points.back());
+    }
+    return r;
 }
 
-void BM_CalibrationFrame(benchmark::State& state) {
-    const Recording& r = threeCubes();
+/// Each scene's frames, rendered once.
+const Recording& recordingOf(const char* sceneName) {
+    static const Recording threeCubes = record("three_cubes");
+    static const Recording crowd = record("crowd");
+    return std::string_view(sceneName) == "crowd" ? crowd : threeCubes;
+}
+
+void BM_CalibrationFrame(benchmark::State& state, const char* sceneName) {
+    const Recording& r = recordingOf(sceneName);
     const CalibrationConfig config;
     ObjectCalibrator calibrator(config);
     const std::size_t warmUp = 1500;
@@ -71,10 +79,11 @@ void BM_CalibrationFrame(benchmark::State& state) {
         benchmark::Counter(markers, benchmark::Counter::kAvgIterations);
     state.counters["objects"] = static_cast<double>(calibrator.objectCount());
 }
-BENCHMARK(BM_CalibrationFrame)->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_CalibrationFrame, three_cubes, "three_cubes")->Unit(benchmark::kMicrosecond);
+BENCHMARK_CAPTURE(BM_CalibrationFrame, crowd, "crowd")->Unit(benchmark::kMicrosecond);
 
-void BM_CalibrationSession(benchmark::State& state) {
-    const Recording& r = threeCubes();
+void BM_CalibrationSession(benchmark::State& state, const char* sceneName) {
+    const Recording& r = recordingOf(sceneName);
     const CalibrationConfig config;
     ObjectCalibrator calibrator(config);
     std::vector<double> frame_us(kFrames);
@@ -106,7 +115,27 @@ void BM_CalibrationSession(benchmark::State& state) {
     state.counters["worst_frame"] = static_cast<double>(worstFrame);
     state.counters["models"] = static_cast<double>(calibrator.objectCount());
 }
-BENCHMARK(BM_CalibrationSession)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK_CAPTURE(BM_CalibrationSession, three_cubes, "three_cubes")
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3);
+BENCHMARK_CAPTURE(BM_CalibrationSession, crowd, "crowd")
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3);
+
+void BM_Completion(benchmark::State& state, const char* sceneName) {
+    const Recording& r = recordingOf(sceneName);
+    CalibrationSession session(CalibrationConfig{}, CompletionConfig{}, kFrames, kFrames * 128);
+    for (std::size_t f = 0; f < kFrames; ++f)
+        session.update(r.time_s[f], r.points[f]);
+    std::size_t models = 0;
+    for (auto _ : state)
+        models = session.complete().size();
+    state.counters["models"] = static_cast<double>(models);
+}
+BENCHMARK_CAPTURE(BM_Completion, three_cubes, "three_cubes")
+    ->Unit(benchmark::kMillisecond)
+    ->Iterations(3);
+BENCHMARK_CAPTURE(BM_Completion, crowd, "crowd")->Unit(benchmark::kMillisecond)->Iterations(3);
 
 } // namespace
 
