@@ -331,8 +331,7 @@ private:
     std::map<std::pair<std::uint32_t, std::uint32_t>, std::size_t> sminLargest_;
     double frameRate_hz_ = 100.0;
     std::vector<Site> sites_;
-    /// The session's points as one list (frame f's from frameFirst_[f]) and each one's track.
-    std::vector<std::size_t> frameFirst_;
+    /// Each of the session's points' track, by SessionBuffer::firstPoint(frame) + index.
     std::vector<std::uint32_t> trackOf_;
     /// The place radius of the body being measured (mm).
     double placeRadius_mm_ = 1.5;

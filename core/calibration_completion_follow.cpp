@@ -43,7 +43,6 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
     std::vector<Anchor> anchors;
     std::vector<const Vec3*> taken;
     std::vector<Vec3> from, to;
-    std::vector<std::size_t> which;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
     const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
     const double reach2 = config_.reach_mm * config_.reach_mm;
@@ -129,7 +128,6 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
                 const std::span<const Vec3> points = session.points(h);
                 from.clear();
                 to.clear();
-                which.clear();
                 taken.clear();
                 claim(h);
                 for (std::size_t k = 0; k < anchors.size(); ++k) {
@@ -145,31 +143,11 @@ void CalibrationCompletion::follow(const SessionBuffer& session, Body& body) {
                     taken.push_back(match);
                     from.push_back(a.place());
                     to.push_back(*match);
-                    which.push_back(k);
                 }
                 // The worst point out while any lies off the fit: a point of something passing
                 // by that sat still against the body for a while.
-                std::optional<RigidFit> fit;
-                while (from.size() >= 3) {
-                    fit = fitRigid(from, to);
-                    if (!fit)
-                        break;
-                    std::size_t worst = 0;
-                    double worstResidual = 0.0;
-                    for (std::size_t i = 0; i < from.size(); ++i) {
-                        const double r = (fit->transform.apply(from[i]) - to[i]).norm();
-                        if (r > worstResidual) {
-                            worstResidual = r;
-                            worst = i;
-                        }
-                    }
-                    if (worstResidual <= config_.tracking.maxRms_mm)
-                        break;
-                    fit.reset();
-                    from.erase(from.begin() + static_cast<std::ptrdiff_t>(worst));
-                    to.erase(to.begin() + static_cast<std::ptrdiff_t>(worst));
-                    which.erase(which.begin() + static_cast<std::ptrdiff_t>(worst));
-                }
+                std::optional<RigidFit> fit =
+                    fitDroppingWorst(from, to, config_.tracking.maxRms_mm);
                 // Two points leave the turn about their line open: a marker leaving as another
                 // comes into view. For a few frames the turn is taken from the pose carried on
                 // (one frame's extrapolation is off by hundredths of a millimetre), so that the

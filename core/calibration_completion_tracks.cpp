@@ -55,10 +55,7 @@ double widestTriangleHeight_mm(std::span<const Vec3> points) {
 
 void CalibrationCompletion::linkPointTracks(const SessionBuffer& session) {
     const std::size_t frames = session.frames();
-    frameFirst_.assign(frames + 1, 0);
-    for (std::size_t f = 0; f < frames; ++f)
-        frameFirst_[f + 1] = frameFirst_[f] + session.points(f).size();
-    trackOf_.assign(frameFirst_[frames], 0);
+    trackOf_.assign(session.points(), 0);
     // Where each track was last seen, and how far it moved a frame then.
     struct TrackEnd {
         Vec3 at_mm;
@@ -119,7 +116,7 @@ void CalibrationCompletion::linkPointTracks(const SessionBuffer& session) {
             } else {
                 next.track = nextTrack++;
             }
-            trackOf_[frameFirst_[f] + j] = next.track;
+            trackOf_[session.firstPoint(f) + j] = next.track;
             kept.push_back(next);
         }
         // A track missing from a few frames may still be continued (a marker behind a finger).
@@ -143,7 +140,7 @@ void CalibrationCompletion::placeTracks(const SessionBuffer& session, Body& body
         for (std::size_t i = 0; i < points.size(); ++i) {
             const Vec3 q = bodyFromRig.apply(points[i]);
             if ((q - ball.centre).squaredNorm() <= reach2)
-                seen.emplace_back(trackOf_[frameFirst_[f] + i], q);
+                seen.emplace_back(trackOf_[session.firstPoint(f) + i], q);
         }
     }
     std::stable_sort(seen.begin(), seen.end(),
@@ -169,54 +166,27 @@ void CalibrationCompletion::placeTracks(const SessionBuffer& session, Body& body
 
 std::optional<RigidTransform> CalibrationCompletion::tiedByTracks(const Body& a,
                                                                   const Body& b) const {
-    // Places of one track in both frames: one physical point, seen from both pieces' poses.
-    struct Tie {
-        Vec3 in_a_mm, in_b_mm;
-    };
-    std::vector<Tie> ties;
+    // Places of one track in both frames (b's, a's): one physical point, seen from both pieces'
+    // poses.
+    std::vector<Vec3> from, to;
     const auto& pa = a.trackPlaces;
     const auto& pb = b.trackPlaces;
     for (std::size_t i = 0, j = 0; i < pa.size() && j < pb.size();) {
-        if (pa[i].track < pb[j].track)
+        if (pa[i].track < pb[j].track) {
             ++i;
-        else if (pb[j].track < pa[i].track)
+        } else if (pb[j].track < pa[i].track) {
             ++j;
-        else {
-            ties.push_back({pa[i].place_mm, pb[j].place_mm});
-            ++i;
-            ++j;
+        } else {
+            from.push_back(pb[j++].place_mm);
+            to.push_back(pa[i++].place_mm);
         }
     }
-    // Trimmed: the worst tie dropped while any lies off the fit (a track that jumped to
-    // another marker in a frame it was not plain).
-    std::vector<Vec3> from, to;
-    while (ties.size() >= 3) {
-        from.clear();
-        to.clear();
-        for (const Tie& t : ties) {
-            from.push_back(t.in_b_mm);
-            to.push_back(t.in_a_mm);
-        }
-        const std::optional<RigidFit> fit = fitRigid(from, to);
-        if (!fit)
-            return std::nullopt;
-        std::size_t worst = 0;
-        double worstResidual = -1.0;
-        for (std::size_t k = 0; k < ties.size(); ++k) {
-            const double r = (fit->transform.apply(from[k]) - to[k]).norm();
-            if (r > worstResidual) {
-                worstResidual = r;
-                worst = k;
-            }
-        }
-        if (worstResidual <= kTrackTieTolerance_mm) {
-            if (widestTriangleHeight_mm(from) < kMinTieHeight_mm)
-                return std::nullopt;
-            return fit->transform;
-        }
-        ties.erase(ties.begin() + static_cast<std::ptrdiff_t>(worst));
-    }
-    return std::nullopt;
+    // The worst tie dropped while any lies off the fit: a track that jumped to another marker
+    // in a frame it was not plain.
+    const std::optional<RigidFit> fit = fitDroppingWorst(from, to, kTrackTieTolerance_mm);
+    if (!fit || widestTriangleHeight_mm(from) < kMinTieHeight_mm)
+        return std::nullopt;
+    return fit->transform;
 }
 
 } // namespace edgetrack

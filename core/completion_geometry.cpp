@@ -39,6 +39,29 @@ double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const E
            ball.radius_mm * rotationAngleBetween_rad(a.rotation, b.rotation);
 }
 
+std::optional<RigidFit> fitDroppingWorst(std::vector<Vec3>& from, std::vector<Vec3>& to,
+                                         double tolerance_mm) {
+    while (from.size() >= 3) {
+        std::optional<RigidFit> fit = fitRigid(from, to);
+        if (!fit)
+            return std::nullopt;
+        std::size_t worst = 0;
+        double worstResidual = 0.0;
+        for (std::size_t i = 0; i < from.size(); ++i) {
+            const double r = (fit->transform.apply(from[i]) - to[i]).norm();
+            if (r > worstResidual) {
+                worstResidual = r;
+                worst = i;
+            }
+        }
+        if (worstResidual <= tolerance_mm)
+            return fit;
+        from.erase(from.begin() + static_cast<std::ptrdiff_t>(worst));
+        to.erase(to.begin() + static_cast<std::ptrdiff_t>(worst));
+    }
+    return std::nullopt;
+}
+
 Agreement mostAgreed(std::span<const RigidTransform> transforms, const Extent& ball,
                      double tolerance_mm, std::size_t step) {
     Agreement best;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/marker_model.hpp"
+#include "core/rigid_fit.hpp"
 #include "core/rigid_transform.hpp"
 
 namespace edgetrack::completion_detail {
@@ -28,6 +29,13 @@ Extent extentOf(std::span<const Vec3> markers_mm);
 
 /// How far apart two transforms put the points of a ball (centre, radius): an upper bound (mm).
 double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball);
+
+/// \brief The rigid fit of \a from onto \a to (paired by index), the pair farthest off it
+/// dropped from both while any lies more than \a tolerance_mm off: points of something else
+/// among a body's. Nothing when fewer than three pairs are left or they lie on one line; \a from
+/// and \a to keep the pairs that remain.
+std::optional<RigidFit> fitDroppingWorst(std::vector<Vec3>& from, std::vector<Vec3>& to,
+                                         double tolerance_mm);
 
 /// Which transform the most others come near, and how many come near it (itself included).
 struct Agreement {

@@ -91,6 +91,9 @@ public:
         return points_rig_mm_.span().subspan(frameStart_[frame],
                                              frameStart_[frame + 1] - frameStart_[frame]);
     }
+    /// \return where frame \a frame's points begin among all the session's points, in the order
+    /// points() lists them: points(f)[i] is point firstPoint(f) + i of points().
+    std::size_t firstPoint(std::size_t frame) const { return frameStart_[frame]; }
     /// \return frames refused since the last clear() for lack of room.
     std::uint64_t framesRefused() const { return framesRefused_; }
 
