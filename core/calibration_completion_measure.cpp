@@ -41,7 +41,7 @@ constexpr double kPassShare = 2.0 / 3.0;
 /// A place is a marker only when the body carried it, while it was seen there, farther through
 /// the rig than this many place radii: a point that stands still in the rig (a glint, a screw
 /// head) sits at one place of a body's frame too while the body keeps still, but never when it
-/// moves farther than the place radius.
+/// moves farther than twice the place radius.
 constexpr double kMinTravelInRadii = 4.0;
 
 } // namespace

@@ -361,12 +361,12 @@ TEST(CalibrationCompletion, JoinsTwoPiecesThatShareOnlyATriangleSeenFarApartInTi
 }
 
 // Two pieces of one body sharing three markers, never posed in the same frame: the first is
-// lost when a hand hides everything for eight frames (longer than the tracker predicts a
-// body it lost), after which only the three shared markers
-// are in view until the second piece's other markers come in half a second later. Each piece
-// holds a copy of the shared triangle elsewhere, so three markers find neither piece and the
-// triangle is no identity. The three points are followed frame to frame across the gap and into
-// the second piece's poses: they are the same points in both pieces' frames, which ties them.
+// lost when a hand hides everything for eight frames (longer than the tracker predicts a body it
+// lost), after which only the three shared markers are in view until the second piece's other
+// markers come in half a second later. Each piece holds a copy of the shared triangle elsewhere,
+// so three markers find neither piece and the triangle is no identity. The three points are
+// followed frame to frame across the gap and into the second piece's poses: they are the same
+// points in both pieces' frames, which ties them.
 TEST(CalibrationCompletion, JoinsTwoPiecesWhoseSharedMarkersAreFollowedFromOneToTheOther) {
     std::vector<Vec3> body = test::irregularLayout(10, 27, 15.0);
     for (const auto& [first, angle, offset] :
