@@ -28,7 +28,8 @@ std::vector<MarkerModel> CalibrationSession::complete() {
     seeds.reserve(onlineConfig_.maxObjects);
     for (std::size_t i = 0; i < onlineConfig_.maxObjects; ++i)
         seeds.emplace_back(onlineConfig_.maxMarkersPerObject);
-    seeds.resize(online_.exportModels(seeds));
+    // Completion reads the seeds' layouts and edges; it finds S_min for its own models.
+    seeds.resize(online_.exportLayouts(seeds));
     seedsUsed_ = seeds.size();
     std::vector<MarkerModel> models;
     models.reserve(completionConfig_.maxModels);
