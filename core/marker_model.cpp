@@ -83,8 +83,35 @@ std::size_t countCongruent(const MarkerModel& from, const MarkerModel& to,
     return count;
 }
 
-/// Calls visit(x, y) for every co-visible ordered pair of \a adjB, whatever its length: the
-/// plain walk, for a few triangles.
+/// Markers of `from` that land within tolerance of some marker of `to` (\a toByX, sorted by x)
+/// under `transform`, counted until the count can no longer exceed \a best: only a larger count
+/// matters to a search for the largest. The window in x holds every marker within tolerance.
+std::size_t countCongruentBeyond(const MarkerModel& from, std::span<const Vec3> toByX,
+                                 const RigidTransform& transform, double tolerance,
+                                 std::size_t best) {
+    const double tolerance2 = tolerance * tolerance;
+    // Wider than the tolerance by far more than rounding: the distance test decides.
+    const double window = tolerance * (1.0 + 1e-9);
+    const std::size_t size = from.markers_model_mm.size();
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < size; ++i) {
+        if (count + (size - i) <= best)
+            return count;
+        const Vec3 moved = transform.apply(from.markers_model_mm[i]);
+        auto it = std::lower_bound(toByX.begin(), toByX.end(), moved.x() - window,
+                                   [](const Vec3& n, double x) { return n.x() < x; });
+        for (; it != toByX.end() && it->x() <= moved.x() + window; ++it)
+            if ((moved - *it).squaredNorm() <= tolerance2) {
+                ++count;
+                break;
+            }
+    }
+    return count;
+}
+
+/// Calls visit(x, y) for every co-visible ordered pair of \a adjB, whatever its length, and
+/// corners(x, y, ...) visit(z) for every marker co-visible with both: the plain walk, for a few
+/// triangles.
 struct EveryPair {
     const Adjacency& adjB;
     template <typename Visit>
@@ -92,28 +119,63 @@ struct EveryPair {
         for (std::size_t x = 0; x < adjB.size(); ++x)
             adjB[x].forEach([&](std::size_t y) { visit(x, y); });
     }
+    template <typename Visit>
+    void corners(std::size_t x, std::size_t y, double, double, Visit&& visit) const {
+        (adjB[x] & adjB[y]).forEach(visit);
+    }
 };
 
-/// Calls visit(x, y) for the co-visible ordered pairs whose length lies within \a tolerance of
-/// \a d_mm (and a few just outside, which the caller's exact test refuses), found by a binary
-/// search in the pairs sorted by length: for every triangle of a model against every pair of
-/// another, the walk over all pairs is what made S_min dear.
-struct PairsByLength {
-    std::span<const SminWorkspace::Pair> sorted;
+/// A window of float lengths that holds every length within \a tolerance of \a d_mm by the
+/// double test (and a few just outside, which the caller's exact test refuses).
+struct LengthWindow {
+    float low;
+    float high;
+    LengthWindow(double d_mm, double tolerance)
+        : low(static_cast<float>(d_mm - tolerance) - 1e-3F)
+        , high(static_cast<float>(d_mm + tolerance) + 1e-3F) {}
+    /// Calls visit(pair) for the pairs of \a sorted (by length) within the window.
     template <typename Visit>
-    void operator()(double d_mm, double tolerance, Visit&& visit) const {
-        // Lengths are kept as float; the margin keeps every pair the double test would take.
-        const auto low = static_cast<float>(d_mm - tolerance) - 1e-3F;
-        const auto high = static_cast<float>(d_mm + tolerance) + 1e-3F;
+    void forEachIn(std::span<const SminWorkspace::Pair> sorted, Visit&& visit) const {
         auto it = std::lower_bound(
             sorted.begin(), sorted.end(), low,
             [](const SminWorkspace::Pair& p, float value) { return p.length_mm < value; });
         for (; it != sorted.end() && it->length_mm <= high; ++it)
-            visit(it->x, it->y);
+            visit(*it);
     }
 };
 
-void sortPairs(const MarkerModel& b, const Adjacency& adjB, SminWorkspace::PairList& pairs) {
+/// Calls visit(x, y) for the co-visible ordered pairs whose length lies near \a d_mm, found by a
+/// binary search in the pairs sorted by length, and corners(x, y, ...) visit(z) for the markers
+/// co-visible with both whose distance from x lies near the given length, found the same way in
+/// x's pairs: for every triangle of a model against every pair of another, the walk over all
+/// pairs and then over all their common neighbours is what made S_min dear.
+struct PairsByLength {
+    const Adjacency& adjB;
+    std::span<const SminWorkspace::Pair> byLength;
+    /// The same pairs ordered by x, then by length; x's start at byCorner[cornerStart[x]].
+    std::span<const SminWorkspace::Pair> byCorner;
+    std::span<const std::uint32_t> cornerStart;
+    template <typename Visit>
+    void operator()(double d_mm, double tolerance, Visit&& visit) const {
+        LengthWindow(d_mm, tolerance).forEachIn(byLength, [&](const SminWorkspace::Pair& p) {
+            visit(p.x, p.y);
+        });
+    }
+    template <typename Visit>
+    void corners(std::size_t x, std::size_t y, double dxz_mm, double tolerance,
+                 Visit&& visit) const {
+        const auto ofX = byCorner.subspan(cornerStart[x], cornerStart[x + 1] - cornerStart[x]);
+        LengthWindow(dxz_mm, tolerance).forEachIn(ofX, [&](const SminWorkspace::Pair& p) {
+            if (p.y != y && adjB[y].contains(p.y))
+                visit(p.y);
+        });
+    }
+};
+
+/// Fills \a pairs with b's co-visible ordered pairs sorted by length, \a byCorner with them
+/// sorted by first marker and then length, and \a cornerStart with where each marker's begin.
+void sortPairs(const MarkerModel& b, const Adjacency& adjB, SminWorkspace::PairList& pairs,
+               SminWorkspace::PairList& byCorner, std::vector<std::uint32_t>& cornerStart) {
     pairs.clear();
     const auto& pb = b.markers_model_mm;
     for (std::size_t x = 0; x < adjB.size(); ++x)
@@ -127,19 +189,27 @@ void sortPairs(const MarkerModel& b, const Adjacency& adjB, SminWorkspace::PairL
                          : l.x != r.x               ? l.x < r.x
                                                     : l.y < r.y;
               });
+    byCorner.assign(pairs.begin(), pairs.end());
+    std::stable_sort(
+        byCorner.begin(), byCorner.end(),
+        [](const SminWorkspace::Pair& l, const SminWorkspace::Pair& r) { return l.x < r.x; });
+    cornerStart.assign(adjB.size() + 1, 0);
+    for (const SminWorkspace::Pair& p : byCorner)
+        ++cornerStart[p.x + 1u];
+    for (std::size_t x = 0; x < adjB.size(); ++x)
+        cornerStart[x + 1] += cornerStart[x];
 }
 
 /**
  * Call visit(x, y, z) for every co-visible triangle of `b` whose sides match (within `tolerance`)
  * the sides |ij|, |ik|, |jk| of a triangle, in that order; stop when visit returns true. The
- * pairs (x, y) come from \a pairsNear (EveryPair or PairsByLength); which triangles are visited
- * does not depend on it, only their order.
+ * pairs (x, y) and corners z come from \a pairsNear (EveryPair or PairsByLength); which triangles
+ * are visited does not depend on it, only their order.
  * \return whether a visit stopped the search.
  */
 template <typename PairsNear, typename Visit>
 bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::span<const Vec3> pb,
-                              const Adjacency& adjB, double tolerance, const PairsNear& pairsNear,
-                              Visit&& visit) {
+                              double tolerance, const PairsNear& pairsNear, Visit&& visit) {
     const double dij = (i - j).norm();
     const double dik = (i - k).norm();
     const double djk = (j - k).norm();
@@ -147,7 +217,7 @@ bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::
     pairsNear(dij, tolerance, [&](std::size_t x, std::size_t y) {
         if (stopped || std::abs((pb[x] - pb[y]).norm() - dij) > tolerance)
             return;
-        (adjB[x] & adjB[y]).forEach([&](std::size_t z) {
+        pairsNear.corners(x, y, dik, tolerance, [&](std::size_t z) {
             if (stopped || std::abs((pb[x] - pb[z]).norm() - dik) > tolerance ||
                 std::abs((pb[y] - pb[z]).norm() - djk) > tolerance)
                 return;
@@ -161,13 +231,11 @@ bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::
 // with itself, found from congruent co-visible triangles. The result is a maximum, so the order
 // in which the pairs of b come does not matter.
 std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const MarkerModel& b,
-                              const Adjacency& adjB, std::span<const SminWorkspace::Pair> pairsB,
+                              const PairsByLength& pairsNear, std::span<const Vec3> markersByXB,
                               bool self, const SminConfig& config) {
     const double tol = config.tolerance_mm;
-    const double tol2 = tol * tol;
     const auto& pa = a.markers_model_mm;
     const auto& pb = b.markers_model_mm;
-    const PairsByLength pairsNear{pairsB};
     std::size_t best = 0;
     for (std::size_t i = 0; i < adjA.size(); ++i) {
         adjA[i].forEach([&](std::size_t j) {
@@ -177,7 +245,7 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
                 if (k <= j || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
                     return;
                 forEachCongruentTriangle(
-                    pa[i], pa[j], pa[k], pb.span(), adjB, tol, pairsNear,
+                    pa[i], pa[j], pa[k], pb.span(), tol, pairsNear,
                     [&](std::size_t x, std::size_t y, std::size_t z) {
                         if (self && x == i && y == j && z == k)
                             return false;
@@ -185,7 +253,8 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
                         const Vec3 to[3] = {pb[x], pb[y], pb[z]};
                         const std::optional<RigidFit> fit = fitRigid(from, to);
                         if (fit)
-                            best = std::max(best, countCongruent(a, b, fit->transform, tol2));
+                            best = std::max(best, countCongruentBeyond(a, markersByXB,
+                                                                       fit->transform, tol, best));
                         return false;
                     });
             });
@@ -234,7 +303,7 @@ bool mapsOnto(const MarkerModel& a, const MarkerModel& b, double needed, double 
         });
     for (const Triangle& t : widest) {
         const bool found = forEachCongruentTriangle(
-            pa[t.i], pa[t.j], pa[t.k], pb.span(), adjB, tol, EveryPair{adjB},
+            pa[t.i], pa[t.j], pa[t.k], pb.span(), tol, EveryPair{adjB},
             [&](std::size_t x, std::size_t y, std::size_t z) {
                 const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
                 const Vec3 to[3] = {pb[x], pb[y], pb[z]};
@@ -271,6 +340,9 @@ bool isPartOf(const MarkerModel& part, const MarkerModel& whole, const SminConfi
 SminWorkspace::SminWorkspace(std::size_t maxMarkers) {
     const std::size_t markers = std::min(maxMarkers, MarkerSet::kCapacity);
     pairs_.reserve(markers * (markers > 0 ? markers - 1 : 0));
+    pairsByCorner_.reserve(pairs_.capacity());
+    cornerStart_.reserve(markers + 1);
+    markersByX_.reserve(markers);
 }
 
 void computeSmin(std::span<MarkerModel> models, const SminConfig& config) {
@@ -287,6 +359,7 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
     }
     Adjacency adjA, adjB;
     SminWorkspace::PairList& pairsB = workspace.pairs_;
+    std::vector<Vec3>& byX = workspace.markersByX_;
     // Every pair a <= b, each b's pairs sorted once. The order of the pairs decides nothing but
     // which copy sameShapeAs names when a model has several: for a model, the last pair with a
     // copy in it is the same in this order as in the order of a first.
@@ -298,11 +371,18 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
             if (!known) {
                 if (!bReady) {
                     buildAdjacency(models[b], adjB);
-                    sortPairs(models[b], adjB, pairsB);
+                    sortPairs(models[b], adjB, pairsB, workspace.pairsByCorner_,
+                              workspace.cornerStart_);
+                    byX.assign(models[b].markers_model_mm.begin(),
+                               models[b].markers_model_mm.end());
+                    std::sort(byX.begin(), byX.end(),
+                              [](const Vec3& l, const Vec3& r) { return l.x() < r.x(); });
                     bReady = true;
                 }
                 buildAdjacency(models[a], adjA);
-                known = largestCongruence(models[a], adjA, models[b], adjB, pairsB, self, config);
+                const PairsByLength pairsNear{adjB, pairsB, workspace.pairsByCorner_,
+                                              workspace.cornerStart_};
+                known = largestCongruence(models[a], adjA, models[b], pairsNear, byX, self, config);
                 if (memory)
                     memory->remember(a, b, *known);
             }

@@ -68,7 +68,8 @@ struct SminConfig {
 class SminPairMemory;
 
 /**
- * \brief Working storage of computeSmin: every co-visible pair of one model, sorted by length.
+ * \brief Working storage of computeSmin: every co-visible pair of one model, sorted by length,
+ * and its markers sorted by x.
  * Sized once for models of up to \a maxMarkers markers; a computeSmin given one allocates nothing
  * for such models (a larger model makes it grow).
  */
@@ -88,6 +89,11 @@ private:
     friend void computeSmin(std::span<MarkerModel> models, const SminConfig& config,
                             SminWorkspace& workspace, SminPairMemory* memory);
     PairList pairs_;
+    /// The same pairs by first marker, then length, and where each marker's pairs start.
+    PairList pairsByCorner_;
+    std::vector<std::uint32_t> cornerStart_;
+    /// The other model's markers sorted by x (mm): a moved marker's neighbours lie in a window.
+    std::vector<Vec3> markersByX_;
 };
 
 /**
