@@ -81,11 +81,16 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
     // Bodies the online stage never made a model of: moving rigid sets of points no seed explains.
     trackAll(session);
     discoverBodies(session);
+    // Tracking depends on the bodies alone: with none discovered, the first round's would repeat
+    // the one above.
+    bool posesCurrent = counters_.discovered == 0;
 
     bool changed = true;
     for (int round = 0; round < config_.maxRounds && changed; ++round) {
         ++counters_.rounds;
-        trackAll(session);
+        if (!posesCurrent)
+            trackAll(session);
+        posesCurrent = false;
         for (Body& body : bodies_)
             if (body.alive)
                 follow(session, body);
