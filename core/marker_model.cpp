@@ -93,11 +93,13 @@ std::size_t countCongruentBeyond(const MarkerModel& from, std::span<const Vec3> 
     // Wider than the tolerance by far more than rounding: the distance test decides.
     const double window = tolerance * (1.0 + 1e-9);
     const std::size_t size = from.markers_model_mm.size();
+    // As a matrix: half the arithmetic of a quaternion's rotation, for every marker.
+    const Mat3 rotation = transform.rotationMatrix();
     std::size_t count = 0;
     for (std::size_t i = 0; i < size; ++i) {
         if (count + (size - i) <= best)
             return count;
-        const Vec3 moved = transform.apply(from.markers_model_mm[i]);
+        const Vec3 moved = rotation * from.markers_model_mm[i] + transform.translation_mm;
         auto it = std::lower_bound(toByX.begin(), toByX.end(), moved.x() - window,
                                    [](const Vec3& n, double x) { return n.x() < x; });
         for (; it != toByX.end() && it->x() <= moved.x() + window; ++it)
@@ -228,21 +230,22 @@ bool forEachCongruentTriangle(const Vec3& i, const Vec3& j, const Vec3& k, std::
 }
 
 // The most markers of `a` that fit `b` under one transform other than the identity of a model
-// with itself, found from congruent co-visible triangles. The result is a maximum, so the order
-// in which the pairs of b come does not matter.
+// with itself, found from congruent co-visible triangles, or any number of at least \a enough
+// once one transform reaches it (the caller decides nothing by more). The result is a maximum,
+// so the order in which the pairs of b come does not matter.
 std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const MarkerModel& b,
                               const PairsByLength& pairsNear, std::span<const Vec3> markersByXB,
-                              bool self, const SminConfig& config) {
+                              bool self, std::size_t enough, const SminConfig& config) {
     const double tol = config.tolerance_mm;
     const auto& pa = a.markers_model_mm;
     const auto& pb = b.markers_model_mm;
     std::size_t best = 0;
-    for (std::size_t i = 0; i < adjA.size(); ++i) {
+    for (std::size_t i = 0; i < adjA.size() && best < enough; ++i) {
         adjA[i].forEach([&](std::size_t j) {
-            if (j <= i)
+            if (j <= i || best >= enough)
                 return;
             (adjA[i] & adjA[j]).forEach([&](std::size_t k) {
-                if (k <= j || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
+                if (k <= j || best >= enough || !wellShaped(pa[i], pa[j], pa[k], 2.0 * tol))
                     return;
                 forEachCongruentTriangle(
                     pa[i], pa[j], pa[k], pb.span(), tol, pairsNear,
@@ -255,7 +258,7 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
                         if (fit)
                             best = std::max(best, countCongruentBeyond(a, markersByXB,
                                                                        fit->transform, tol, best));
-                        return false;
+                        return best >= enough;
                     });
             });
         });
@@ -382,7 +385,15 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
                 buildAdjacency(models[a], adjA);
                 const PairsByLength pairsNear{adjB, pairsB, workspace.pairsByCorner_,
                                               workspace.cornerStart_};
-                known = largestCongruence(models[a], adjA, models[b], pairsNear, byX, self, config);
+                // A copy is a copy however much more of it maps; no count exceeds a's markers.
+                const std::size_t smaller = std::min(models[a].markers_model_mm.size(),
+                                                     models[b].markers_model_mm.size());
+                const std::size_t enough =
+                    self ? models[a].markers_model_mm.size()
+                         : static_cast<std::size_t>(std::ceil(config.sameShapeShare *
+                                                              static_cast<double>(smaller)));
+                known = largestCongruence(models[a], adjA, models[b], pairsNear, byX, self, enough,
+                                          config);
                 if (memory)
                     memory->remember(a, b, *known);
             }
