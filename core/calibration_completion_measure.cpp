@@ -375,9 +375,14 @@ void addToReducedSystem(const RigidTransform& T_rig_from_body, std::span<const V
         const auto a = static_cast<Eigen::Index>(3 * which[i]);
         reduced.block<3, 3>(a, a) += Mat3::Identity();
         rhs.segment<3>(a) -= rotation.transpose() * residual[i] - hpm[i].transpose() * hppInvGp;
-        for (std::size_t j = 0; j < count; ++j) {
+        // The system is symmetric (H_pp is): each block below the diagonal is one above it,
+        // transposed.
+        reduced.block<3, 3>(a, a) -= hpm[i].transpose() * hppInvHpm[i];
+        for (std::size_t j = i + 1; j < count; ++j) {
             const auto b = static_cast<Eigen::Index>(3 * which[j]);
-            reduced.block<3, 3>(a, b) -= hpm[i].transpose() * hppInvHpm[j];
+            const Mat3 block = hpm[i].transpose() * hppInvHpm[j];
+            reduced.block<3, 3>(a, b) -= block;
+            reduced.block<3, 3>(b, a) -= block.transpose();
         }
     }
 }
