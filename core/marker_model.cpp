@@ -252,12 +252,11 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
                     [&](std::size_t x, std::size_t y, std::size_t z) {
                         if (self && x == i && y == j && z == k)
                             return false;
-                        const Vec3 from[3] = {pa[i], pa[j], pa[k]};
-                        const Vec3 to[3] = {pb[x], pb[y], pb[z]};
-                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        const std::optional<RigidTransform> fit =
+                            fitTriangle({pa[i], pa[j], pa[k]}, {pb[x], pb[y], pb[z]});
                         if (fit)
-                            best = std::max(best, countCongruentBeyond(a, markersByXB,
-                                                                       fit->transform, tol, best));
+                            best = std::max(best,
+                                            countCongruentBeyond(a, markersByXB, *fit, tol, best));
                         return best >= enough;
                     });
             });
@@ -386,12 +385,12 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
                 const PairsByLength pairsNear{adjB, pairsB, workspace.pairsByCorner_,
                                               workspace.cornerStart_};
                 // A copy is a copy however much more of it maps; no count exceeds a's markers.
-                const std::size_t smaller = std::min(models[a].markers_model_mm.size(),
-                                                     models[b].markers_model_mm.size());
+                const std::size_t smaller =
+                    std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size());
                 const std::size_t enough =
                     self ? models[a].markers_model_mm.size()
-                         : static_cast<std::size_t>(std::ceil(config.sameShapeShare *
-                                                              static_cast<double>(smaller)));
+                         : static_cast<std::size_t>(
+                               std::ceil(config.sameShapeShare * static_cast<double>(smaller)));
                 known = largestCongruence(models[a], adjA, models[b], pairsNear, byX, self, enough,
                                           config);
                 if (memory)

@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include <Eigen/Geometry>
 #include <Eigen/SVD>
 
 namespace edgetrack {
@@ -49,6 +50,35 @@ std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec
         sumSquares += (to[i] - fit.transform.apply(from[i])).squaredNorm();
     fit.rms_mm = std::sqrt(sumSquares * inverseCount);
     return fit;
+}
+
+std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
+                                          const std::array<Vec3, 3>& to) {
+    const Vec3 normalFrom = (from[1] - from[0]).cross(from[2] - from[0]);
+    const Vec3 normalTo = (to[1] - to[0]).cross(to[2] - to[0]);
+    // Twice the area against the squared sides: the same relative test of flatness as fitRigid.
+    auto flat = [](const Vec3& normal, const std::array<Vec3, 3>& t) {
+        return !(normal.norm() >
+                 1e-9 * ((t[1] - t[0]).squaredNorm() + (t[2] - t[0]).squaredNorm()));
+    };
+    if (flat(normalFrom, from) || flat(normalTo, to))
+        return std::nullopt;
+    const Vec3 centroidFrom = (from[0] + from[1] + from[2]) / 3.0;
+    const Vec3 centroidTo = (to[0] + to[1] + to[2]) / 3.0;
+    const Vec3 axis = normalTo.normalized();
+    const Quat tilt = Quat::FromTwoVectors(normalFrom, normalTo);
+    double sine = 0.0, cosine = 0.0;
+    for (std::size_t i = 0; i < 3; ++i) {
+        const Vec3 a = tilt * (from[i] - centroidFrom);
+        const Vec3 b = to[i] - centroidTo;
+        sine += axis.dot(a.cross(b));
+        cosine += a.dot(b);
+    }
+    RigidTransform transform;
+    transform.rotation =
+        (Quat(Eigen::AngleAxisd(std::atan2(sine, cosine), axis)) * tilt).normalized();
+    transform.translation_mm = centroidTo - transform.rotation * centroidFrom;
+    return transform;
 }
 
 } // namespace edgetrack

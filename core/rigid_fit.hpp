@@ -1,6 +1,7 @@
 // Least-squares rigid fit of two point sets (Kabsch / Umeyama without scale).
 #pragma once
 
+#include <array>
 #include <optional>
 #include <span>
 
@@ -25,5 +26,16 @@ struct RigidFit {
  * (nearly) collinear, so that the rotation about their line is undetermined.
  */
 std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec3> to);
+
+/**
+ * \brief fitRigid's transform for two triangles of (nearly) equal sides, corners paired by
+ * index, in closed form: three points lie in a plane, so the least-squares rotation turns the one
+ * triangle's normal onto the other's and then turns in that plane by the two-dimensional
+ * Procrustes angle. For searches that try thousands of triangle pairs (S_min), where the SVD was
+ * most of a try's cost.
+ * \return nothing when either triangle is (nearly) collinear.
+ */
+std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
+                                          const std::array<Vec3, 3>& to);
 
 } // namespace edgetrack

@@ -98,3 +98,38 @@ TEST(RigidFit, DoesNotAllocate) {
     EXPECT_EQ(count, 0u);
     EXPECT_GT(sink, 0.0);
 }
+
+TEST(RigidFit, TriangleFitIsTheLeastSquaresFit) {
+    // Triangles of nearly equal sides in every attitude, corners paired by index: the closed form
+    // must give fitRigid's transform (its SVD the reference).
+    std::mt19937 random(4);
+    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
+    std::normal_distribution<double> noise(0.0, 0.3);
+    std::uniform_real_distribution<double> angle(-3.1, 3.1);
+    int compared = 0;
+    for (int trial = 0; trial < 500; ++trial) {
+        std::array<Vec3, 3> from, to;
+        RigidTransform T;
+        T.rotation = Quat(Eigen::AngleAxisd(
+            angle(random),
+            Vec3(coordinate(random), coordinate(random), coordinate(random)).normalized()));
+        T.translation_mm = {coordinate(random), coordinate(random), 500.0};
+        for (std::size_t i = 0; i < 3; ++i) {
+            from[i] = {coordinate(random), coordinate(random), coordinate(random)};
+            to[i] = T.apply(from[i]) + Vec3{noise(random), noise(random), noise(random)};
+        }
+        const auto reference = fitRigid(from, to);
+        const auto closed = fitTriangle(from, to);
+        ASSERT_EQ(reference.has_value(), closed.has_value());
+        if (!reference)
+            continue;
+        EXPECT_LT((closed->rotationMatrix() - reference->transform.rotationMatrix()).norm(), 1e-9);
+        EXPECT_LT((closed->translation_mm - reference->transform.translation_mm).norm(), 1e-7);
+        ++compared;
+    }
+    EXPECT_GT(compared, 490);
+    const std::array<Vec3, 3> line{Vec3{0, 0, 0}, Vec3{10, 0, 0}, Vec3{25, 0, 0}};
+    const std::array<Vec3, 3> corner{Vec3{0, 0, 0}, Vec3{10, 0, 0}, Vec3{0, 10, 0}};
+    EXPECT_FALSE(fitTriangle(line, corner));
+    EXPECT_FALSE(fitTriangle(corner, line));
+}
