@@ -222,19 +222,28 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::vector<Vec3> lowest(n, Vec3::Constant(std::numeric_limits<double>::infinity()));
     std::vector<Vec3> highest(n, Vec3::Constant(-std::numeric_limits<double>::infinity()));
     const auto passGap = static_cast<std::size_t>(std::ceil(kPassGap_s * frameRate_hz_));
+    std::vector<Vec3> nearPoints;
+    const double placeReach2 = (reach + placeRadius_mm_) * (reach + placeRadius_mm_);
     for (int pass = 0; pass < 2; ++pass) {
         for (std::size_t f = 0; f < frames; ++f) {
             if (!body.posed[f])
                 continue;
             const RigidTransform& T_rig_from_body = body.T_rig_from_body[f];
             const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
-            const std::span<const Vec3> points = session.points(f);
+            // Only points within reach of the body can be on a place (every place lies within
+            // reach of its centre): the other objects' points are most of a frame's.
+            const Vec3 centre = T_rig_from_body.apply(extent.centre);
+            nearPoints.clear();
+            for (const Vec3& p : session.points(f))
+                if ((p - centre).squaredNorm() <= placeReach2)
+                    nearPoints.push_back(p);
             hitNow.clear();
             for (std::size_t k = 0; k < n; ++k) {
                 const Vec3 there = T_rig_from_body.apply(place[k]);
-                const bool isHit = std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
-                    return (p - there).squaredNorm() <= radius2;
-                });
+                const bool isHit =
+                    std::any_of(nearPoints.begin(), nearPoints.end(), [&](const Vec3& p) {
+                        return (p - there).squaredNorm() <= radius2;
+                    });
                 const Vec3 view = (viewpoint - place[k]).normalized();
                 std::vector<Vec3>& directions = seenFrom[k];
                 if (pass == 0) {
