@@ -121,11 +121,16 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
     // markers measured as means of points placed by poses of three or four markers lie up to a
     // millimetre off (a ring's two pieces sharing five markers put two of them beyond the 0.5 mm
     // of a layout match: random_objects seed 6).
-    for (Body& body : bodies_)
-        if (body.alive) {
-            body.refined_mm = refinedMarkers(session, body);
-            placeTracks(session, body);
-        }
+    // Only pairs the joint tracking did not tell apart need them: each body's are made at the
+    // first such pair, or before a join changes it, from its poses as the round found them.
+    std::vector<char> prepared(alive, 0);
+    auto prepare = [&](std::size_t b) {
+        if (prepared[b])
+            return;
+        prepared[b] = 1;
+        bodies_[b].refined_mm = refinedMarkers(session, bodies_[b]);
+        placeTracks(session, bodies_[b]);
+    };
     std::vector<char> trackedAlone(alive, 0);
     auto trackAlone = [&](std::size_t b) {
         if (trackedAlone[b])
@@ -210,6 +215,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // joint tracker gives to one of them. Each found alone, they move as one.
                 trackAlone(a);
                 trackAlone(b);
+                prepare(a);
+                prepare(b);
                 // Or one may be a piece of the other that the tracker gave the other's points to,
                 // or the two may share markers but never be in view together. Four or more
                 // markers in one place of the other's layout tie them, unless a self-similar
@@ -277,6 +284,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
             }
             if (!T_into_from_from)
                 continue;
+            prepare(a);
+            prepare(b);
             const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
             // The piece's markers it does not have yet; its refined layout grows alike, for the
             // pairs still to come this round.
