@@ -192,9 +192,13 @@ void sortPairs(const MarkerModel& b, const Adjacency& adjB, SminWorkspace::PairL
                                                     : l.y < r.y;
               });
     byCorner.assign(pairs.begin(), pairs.end());
-    std::stable_sort(
-        byCorner.begin(), byCorner.end(),
-        [](const SminWorkspace::Pair& l, const SminWorkspace::Pair& r) { return l.x < r.x; });
+    // std::sort, not a stable sort by x alone: that takes a buffer from the heap.
+    std::sort(byCorner.begin(), byCorner.end(),
+              [](const SminWorkspace::Pair& l, const SminWorkspace::Pair& r) {
+                  return l.x != r.x                   ? l.x < r.x
+                         : l.length_mm != r.length_mm ? l.length_mm < r.length_mm
+                                                      : l.y < r.y;
+              });
     cornerStart.assign(adjB.size() + 1, 0);
     for (const SminWorkspace::Pair& p : byCorner)
         ++cornerStart[p.x + 1u];
