@@ -374,6 +374,11 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
         for (std::size_t a = 0; a <= b; ++a) {
             const bool self = a == b;
             std::optional<std::size_t> known = memory ? memory->recall(a, b) : std::nullopt;
+            // Two models are copies when this many markers of the smaller map onto the other.
+            const double copyMarkers =
+                config.sameShapeShare *
+                static_cast<double>(
+                    std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size()));
             if (!known) {
                 if (!bReady) {
                     buildAdjacency(models[b], adjB);
@@ -389,21 +394,15 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config, SminWo
                 const PairsByLength pairsNear{adjB, pairsB, workspace.pairsByCorner_,
                                               workspace.cornerStart_};
                 // A copy is a copy however much more of it maps; no count exceeds a's markers.
-                const std::size_t smaller =
-                    std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size());
-                const std::size_t enough =
-                    self ? models[a].markers_model_mm.size()
-                         : static_cast<std::size_t>(
-                               std::ceil(config.sameShapeShare * static_cast<double>(smaller)));
+                const std::size_t enough = self ? models[a].markers_model_mm.size()
+                                                : static_cast<std::size_t>(std::ceil(copyMarkers));
                 known = largestCongruence(models[a], adjA, models[b], pairsNear, byX, self, enough,
                                           config);
                 if (memory)
                     memory->remember(a, b, *known);
             }
             const std::size_t l = *known;
-            const double smaller = static_cast<double>(
-                std::min(models[a].markers_model_mm.size(), models[b].markers_model_mm.size()));
-            if (!self && static_cast<double>(l) >= config.sameShapeShare * smaller) {
+            if (!self && static_cast<double>(l) >= copyMarkers) {
                 models[a].sameShapeAs = static_cast<std::int32_t>(b);
                 models[b].sameShapeAs = static_cast<std::int32_t>(a);
                 continue;
