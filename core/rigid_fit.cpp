@@ -56,7 +56,8 @@ std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
                                           const std::array<Vec3, 3>& to) {
     const Vec3 normalFrom = (from[1] - from[0]).cross(from[2] - from[0]);
     const Vec3 normalTo = (to[1] - to[0]).cross(to[2] - to[0]);
-    // Twice the area against the squared sides: the same relative test of flatness as fitRigid.
+    // Twice the area against the squared sides: a test of flatness that, like fitRigid's,
+    // does not depend on the triangle's size.
     auto flat = [](const Vec3& normal, const std::array<Vec3, 3>& t) {
         return !(normal.norm() >
                  1e-9 * ((t[1] - t[0]).squaredNorm() + (t[2] - t[0]).squaredNorm()));
