@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numbers>
 
 #include "core/simd/neon.hpp"
 #include "core/triangulation.hpp"
@@ -16,6 +17,12 @@ constexpr std::size_t idx(int i) {
     return static_cast<std::size_t>(i);
 }
 constexpr std::size_t kMaxNeighbours = 32;
+
+/// The radius (px) of a disc of \a blob's area: a split part's and a cut disc's area is that of
+/// its fitted circle. 0 for a blob of no area (blobs made by hand, without pixels).
+double sizeRadius(const Blob& blob) {
+    return std::sqrt(static_cast<double>(blob.area_px) / std::numbers::pi);
+}
 
 // A blob's neighbourhood in region R as separate x and y arrays of offsets (rectified px), padded
 // to whole NEON vectors with far-away points that never win a minimum.
@@ -74,6 +81,9 @@ struct StereoMatcher::Prepared {
         for (int c = 0; c < 2; ++c) {
             rectified[c] = std::make_unique<Vec2[]>(maxBlobs);
             pixel[c] = std::make_unique<Vec2[]>(maxBlobs);
+            radius[c] = std::make_unique<double[]>(maxBlobs);
+            taken[c] = std::make_unique<bool[]>(maxBlobs);
+            refusedWith[c] = std::make_unique<int[]>(maxBlobs);
             rays[c] = std::make_unique<Ray[]>(maxBlobs);
             valid[c] = std::make_unique<bool[]>(maxBlobs);
             neighbours[c] = std::make_unique<Neighbourhood[]>(maxBlobs);
@@ -89,6 +99,12 @@ struct StereoMatcher::Prepared {
     std::size_t count[2] = {0, 0};
     std::unique_ptr<Vec2[]> rectified[2];
     std::unique_ptr<Vec2[]> pixel[2];
+    /// Radius of a disc of the blob's area (px).
+    std::unique_ptr<double[]> radius[2];
+    /// Part of a marker already: left out of a second round of correspondence.
+    std::unique_ptr<bool[]> taken[2];
+    /// The other camera's blob it was paired with and refused for their sizes, or -1.
+    std::unique_ptr<int[]> refusedWith[2];
     std::unique_ptr<Ray[]> rays[2];
     std::unique_ptr<bool[]> valid[2];
     /// Offsets of the other blobs of the same camera inside region R (rectified px).
@@ -167,6 +183,9 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
         p.count[c] = std::min(blobs[c].size(), maxBlobs_);
         for (std::size_t i = 0; i < p.count[c]; ++i) {
             p.pixel[c][i] = blobs[c][i].centre_px;
+            p.radius[c][i] = sizeRadius(blobs[c][i]);
+            p.taken[c][i] = false;
+            p.refusedWith[c][i] = -1;
             p.valid[c][i] = false;
             const std::optional<Ray> ray = rig_.camera(c).ray(blobs[c][i].centre_px);
             if (!ray) {
@@ -338,7 +357,8 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
         for (int t = p.lowerBound(1, y - band_px_);
              t < static_cast<int>(p.validCount[1]) && p.rowOf(1, t) <= y + band_px_; ++t) {
             const int j = p.byRow[1][idx(t)];
-            if (inBand(i, j))
+            if (!p.taken[0][idx(i)] && !p.taken[1][idx(j)] && p.refusedWith[0][idx(i)] != j &&
+                inBand(i, j))
                 blocks_.link(idx(i), idx(j));
         }
     }
@@ -362,11 +382,20 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
 }
 
 bool StereoMatcher::checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0,
-                                  const Vec2& pixel1, StereoMarker& marker) {
+                                  const Vec2& pixel1, double radius0_px, double radius1_px,
+                                  StereoMarker& marker) {
     const std::optional<TriangulatedPoint> point = triangulate(ray0, ray1);
     if (!point || point->range0_mm <= 0.0 || point->range1_mm <= 0.0 ||
         point->rayGap_mm > config_.maxRayGap_mm) {
         ++counters_.rejectedRayGap;
+        return false;
+    }
+    // Two markers on one epipolar line pair into a point at neither: each blob keeps the size of
+    // its own marker at its own range, which the point's ranges do not explain.
+    if (config_.maxSizeMismatch > 0.0 && radius0_px > 0.0 && radius1_px > 0.0 &&
+        std::abs(std::log((radius0_px * point->range0_mm) / (radius1_px * point->range1_mm))) >
+            config_.maxSizeMismatch) {
+        ++counters_.rejectedSize;
         return false;
     }
     double reprojection = 0.0;
@@ -389,9 +418,15 @@ bool StereoMatcher::checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& 
 void StereoMatcher::triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out) {
     const Prepared& p = *prepared_;
     StereoMarker candidate;
+    const std::uint64_t refusedBefore = counters_.rejectedSize;
     if (!checkedMarker(p.rays[0][idx(i)], p.rays[1][idx(j)], p.pixel[0][idx(i)], p.pixel[1][idx(j)],
-                       candidate))
+                       p.radius[0][idx(i)], p.radius[1][idx(j)], candidate)) {
+        if (counters_.rejectedSize != refusedBefore) {
+            prepared_->refusedWith[0][idx(i)] = j;
+            prepared_->refusedWith[1][idx(j)] = i;
+        }
         return;
+    }
     StereoMarker* marker = out.append();
     if (marker == nullptr) {
         ++counters_.markerOverflow;
@@ -428,7 +463,8 @@ bool StereoMatcher::triangulateBlobs(const Blob& blob0, int i, const Blob& blob1
         ++counters_.unrectifiable;
         return false;
     }
-    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, marker))
+    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, sizeRadius(blob0),
+                       sizeRadius(blob1), marker))
         return false;
     marker.blob0 = i;
     marker.blob1 = j;
@@ -443,6 +479,19 @@ void StereoMatcher::match(std::span<const Blob> blobs0, std::span<const Blob> bl
     if (!valid_)
         return;
     prepare(blobs0, blobs1);
+    correspond(pairs_);
+    const std::uint64_t refusedBefore = counters_.rejectedSize;
+    for (const IndexPair& pair : pairs_)
+        triangulatePair(pair.left, pair.right, out);
+    if (counters_.rejectedSize == refusedBefore)
+        return;
+    // A blob paired with another marker's blob on its epipolar line (refused for their sizes)
+    // may have its own partner among the blobs left over: they are corresponded once more.
+    Prepared& p = *prepared_;
+    for (const StereoMarker& marker : out) {
+        p.taken[0][idx(marker.blob0)] = true;
+        p.taken[1][idx(marker.blob1)] = true;
+    }
     correspond(pairs_);
     for (const IndexPair& pair : pairs_)
         triangulatePair(pair.left, pair.right, out);

@@ -32,6 +32,11 @@ struct StereoConfig {
     double maxRayGap_mm = 1.5;
     /// A marker must reproject within this distance of both its blobs.
     double maxReprojection_px = 1.5;
+    /// A sphere's image radius times its range is the same in both cameras: a pair of blobs
+    /// whose two products differ by more than this (natural log of their ratio) is two different
+    /// markers on one epipolar line. 0 turns the test off (flat markers, which the two cameras
+    /// see at different slants).
+    double maxSizeMismatch = 0.10;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
 
@@ -65,6 +70,8 @@ struct StereoCounters {
     std::uint64_t correspondences = 0;
     std::uint64_t rejectedRayGap = 0;
     std::uint64_t rejectedReprojection = 0;
+    /// Pairs whose two blobs' sizes do not fit one sphere at the triangulated ranges.
+    std::uint64_t rejectedSize = 0;
     std::uint64_t unrectifiable = 0;
     std::uint64_t markerOverflow = 0;
 };
@@ -143,8 +150,9 @@ private:
     void collectNeighbours(int camera);
     void triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out);
     /// Triangulate two rays into \a marker's position, ray gap and reprojection, with the checks.
+    /// \a radius0_px and \a radius1_px are the blobs' radii (px), 0 where unknown.
     bool checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0, const Vec2& pixel1,
-                       StereoMarker& marker);
+                       double radius0_px, double radius1_px, StereoMarker& marker);
 
     StereoRig rig_;
     StereoConfig config_;

@@ -1,5 +1,6 @@
 // Tests of stereo correspondence: block solution equals the full-matrix SVD, markers are exact,
 // the epipolar-only baseline makes false markers that SVD matching avoids.
+#include <numbers>
 #include <numeric>
 #include <random>
 #include <set>
@@ -247,6 +248,53 @@ TEST(StereoMatcher, SharedEpipolarLinesFoolTheBaselineNotTheSvd) {
     EXPECT_EQ(svd.size(), points.size());
     EXPECT_EQ(falseMarkers(svd), 0);
     EXPECT_GE(falseMarkers(baseline), 6);
+}
+
+// The blob of a 10 mm sphere at \a point_rig_mm as camera \a camera sees it: its centre, and
+// the area of its disc.
+Blob sphereBlob(int camera, const Vec3& point_rig_mm) {
+    const CameraModel& model = simRig().camera(camera);
+    const Vec3 centre = model.centre_rig_mm();
+    const Vec3 across = (point_rig_mm - centre).cross(Vec3::UnitY()).normalized();
+    const Vec2 pixel = *model.project(point_rig_mm);
+    const double radius_px = (*model.project(point_rig_mm + 5.0 * across) - pixel).norm();
+    Blob blob;
+    blob.centre_px = pixel;
+    blob.area_px = static_cast<float>(std::numbers::pi * radius_px * radius_px);
+    return blob;
+}
+
+TEST(StereoMatcher, RefusesTwoMarkersOnOneEpipolarLineWhoseSizesFitNoOneSphere) {
+    // Marker A is seen by camera 0 only, marker B, on the same epipolar plane and farther, by
+    // camera 1 only (each hidden from the other camera): their two blobs pair into a point at
+    // neither. Marker C, seen by both, pairs as before.
+    const Vec3 c0 = simRig().camera(0).centre_rig_mm();
+    const Vec3 c1 = simRig().camera(1).centre_rig_mm();
+    const Vec3 a(40.0, 10.0, 480.0);
+    const Vec3 b = a + 30.0 * (c1 - c0).normalized() + 120.0 * (a - c0).normalized();
+    const Vec3 c(-60.0, -80.0, 560.0);
+    const std::vector<Blob> camera0{sphereBlob(0, a), sphereBlob(0, c)};
+    const std::vector<Blob> camera1{sphereBlob(1, b), sphereBlob(1, c)};
+    for (const double mismatch : {0.0, 0.1}) {
+        StereoConfig config;
+        config.maxSizeMismatch = mismatch;
+        StereoMatcher matcher(simRig(), config, 8);
+        BoundedVector<StereoMarker> markers(8);
+        matcher.match(camera0, camera1, markers);
+        const bool refusing = mismatch > 0.0;
+        ASSERT_EQ(markers.size(), refusing ? 1U : 2U) << mismatch;
+        EXPECT_EQ(matcher.counters().rejectedSize, refusing ? 1U : 0U);
+        bool foundC = false;
+        for (const StereoMarker& m : markers) {
+            const double toC = (m.position_rig_mm - c).norm();
+            foundC = foundC || toC < 1e-6;
+            if (toC >= 1e-6) { // the ghost: far from both markers it was made of
+                EXPECT_GT(std::min((m.position_rig_mm - a).norm(), (m.position_rig_mm - b).norm()),
+                          20.0);
+            }
+        }
+        EXPECT_TRUE(foundC) << mismatch;
+    }
 }
 
 TEST(StereoMatcher, BlobSeenByOneCameraOnlyMakesNoMarker) {
