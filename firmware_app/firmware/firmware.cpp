@@ -628,6 +628,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsCut = refused.cutDiscs;
     counters_.blobsSplitOnLines = refused.splitOnLines;
     counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
+    counters_.stereoPairsRefusedBySize = markers_.stereo().counters().rejectedSize;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -735,6 +736,7 @@ std::string Firmware::statusReport() const {
     row("discs cut by an edge, centred by their arc", c.blobsCut);
     row("blobs split on the other camera's lines", c.blobsSplitOnLines);
     row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);
+    row("stereo pairs refused: blob sizes fit no one marker", c.stereoPairsRefusedBySize);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

@@ -84,6 +84,8 @@ struct FirmwareCounters {
     /// tried for want of a frame's budget.
     std::uint64_t blobsSplitOnLines = 0;
     std::uint64_t splitsOnLinesSkipped = 0;
+    /// Stereo pairs of two blobs whose sizes fit no one sphere (two markers on one epipolar line).
+    std::uint64_t stereoPairsRefusedBySize = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;

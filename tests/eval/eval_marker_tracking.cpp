@@ -130,6 +130,8 @@ int main(int argc, char** argv) {
     app.add_option("--sigma-similarity", stereoConfig.sigmaSimilarity_px,
                    "sigma_sim of eq. 4 (px)");
     app.add_option("--region", stereoConfig.neighbourhood_px, "S, side of region R (px)");
+    app.add_option("--max-size-mismatch", stereoConfig.maxSizeMismatch,
+                   "largest log ratio of the two blobs' radius times range (0: off)");
     FrameToFrameConfig trackConfig;
     app.add_option("--sigma-t", trackConfig.sigma_mm, "sigma_t of eq. 5 (mm)");
     app.add_option("--gate", trackConfig.gate_mm, "frame-to-frame gate (mm)");
