@@ -34,6 +34,10 @@ struct Totals {
     std::uint64_t missedNoBlob = 0;
     std::uint64_t missedByStereo = 0;
     std::uint64_t falseMarkers = 0;
+    /// False markers by what their two images are: two different markers' images (a ghost of two
+    /// markers on one epipolar line), one marker's two images (a centre off), or neither.
+    std::uint64_t falseOfTwoMarkers = 0;
+    std::uint64_t falseOfOneMarker = 0;
     std::uint64_t spuriousPointsFound = 0;
     double squaredError = 0.0;
     double maxError = 0.0;
@@ -70,6 +74,11 @@ std::size_t separationBin(double separation) {
     return separation < 0.5 ? 0 : separation < 0.75 ? 1 : separation < 1.0 ? 2 : 3;
 }
 
+/// The index of the marker of \a observation visible in camera \a camera whose image centre lies
+/// nearest where \a point_rig_mm projects, within 10 px; -1 for none.
+int markerImageAt(const StereoRig& rig, const sim::Observation& observation,
+                  const Vec3& point_rig_mm, int camera);
+
 /// For each marker of \a observation, whether a point of \a points lies within kFoundRadius_mm
 /// (each point claimed once, markers in order); false for markers not seen by both cameras.
 std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points);
@@ -89,6 +98,25 @@ const Blob* blobAt(std::span<const Blob> blobs, const Vec2& at_px) {
             nearest = &b;
     return nearest != nullptr && (nearest->centre_px - at_px).norm() < kAtMarker_px ? nearest
                                                                                     : nullptr;
+}
+
+int markerImageAt(const StereoRig& rig, const sim::Observation& observation,
+                  const Vec3& point_rig_mm, int camera) {
+    const std::optional<Vec2> pixel = rig.camera(camera).project(point_rig_mm);
+    if (!pixel)
+        return -1;
+    const auto c = static_cast<std::size_t>(camera);
+    int nearest = -1;
+    double nearestDistance = 10.0;
+    for (std::size_t i = 0; i < observation.markers.size(); ++i) {
+        const sim::MarkerView& m = observation.markers[i];
+        const double d = (m.pixel[c] - *pixel).norm();
+        if (m.visible[c] && d < nearestDistance) {
+            nearestDistance = d;
+            nearest = static_cast<int>(i);
+        }
+    }
+    return nearest;
 }
 
 std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<const Vec3> points) {
@@ -308,10 +336,15 @@ int main(int argc, char** argv) {
             bool spurious = false;
             for (const sim::MarkerView& s : observation.spuriousPoints)
                 spurious = spurious || (s.position_rig_mm - points[k]).norm() < 3.0;
-            if (spurious)
+            if (spurious) {
                 ++totals.spuriousPointsFound;
-            else if (!real)
+            } else if (!real) {
                 ++totals.falseMarkers;
+                const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
+                const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
+                if (seen0 >= 0 && seen1 >= 0)
+                    ++(seen0 == seen1 ? totals.falseOfOneMarker : totals.falseOfTwoMarkers);
+            }
         }
         previousIdOfTruth.swap(idOfTruth);
         previousTruthOfId.swap(truthOfId);
@@ -337,6 +370,12 @@ int main(int argc, char** argv) {
     std::printf("  found: %.4f%%   false markers: %llu (%.4f%% of true)   spurious points: %llu\n",
                 100.0 * foundShare, static_cast<unsigned long long>(totals.falseMarkers),
                 100.0 * falseShare, static_cast<unsigned long long>(totals.spuriousPointsFound));
+    std::printf("  false markers whose images are two markers' (on one epipolar line): %llu; one "
+                "marker's (a centre off): %llu; other: %llu\n",
+                static_cast<unsigned long long>(totals.falseOfTwoMarkers),
+                static_cast<unsigned long long>(totals.falseOfOneMarker),
+                static_cast<unsigned long long>(totals.falseMarkers - totals.falseOfTwoMarkers -
+                                                totals.falseOfOneMarker));
     std::printf("  of all %llu markers seen by both cameras, merged or not: %.4f%% found\n",
                 static_cast<unsigned long long>(totals.visibleToBoth),
                 100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /
