@@ -2,6 +2,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -59,6 +60,12 @@ struct Blob {
     /// For a split part or a cut disc, the RMS distance of its outline points from the fitted
     /// circle (px).
     float fitRms_px = 0.0f;
+
+    /// \return the radius (px) of a disc of the blob's area; a split part's and a cut disc's area
+    /// is that of its fitted circle. 0 for a blob of no area.
+    double discRadius_px() const {
+        return std::sqrt(static_cast<double>(area_px) / 3.14159265358979323846);
+    }
 };
 
 /// \brief A straight line in raw pixels of one camera: point_px + t * direction, direction a unit

@@ -66,11 +66,6 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
 }
 
 namespace {
-/// The radius (px) of a disc of \a blob's area.
-double radiusOf(const Blob& blob) {
-    return std::sqrt(static_cast<double>(blob.area_px) / 3.14159265358979323846);
-}
-
 /// Whether \a a and \b b are parts of one blob split into discs (they keep its bounds).
 bool partsOfOneBlob(const Blob& a, const Blob& b) {
     return a.split && b.split && a.left == b.left && a.top == b.top && a.right == b.right &&
@@ -190,7 +185,7 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
             Vec2 partRectified;
             if (!stereo_.preparedBlob(1 - camera, member[k], partRay, partRectified))
                 continue;
-            const double radius = radiusOf(otherBlobs[static_cast<std::size_t>(member[k])]);
+            const double radius = otherBlobs[static_cast<std::size_t>(member[k])].discRadius_px();
             off =
                 std::min(off, crossingOff(camera, rectified, partRectified, radius + 1.0, radius));
         }
@@ -212,7 +207,7 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
         const Blob& part = otherBlobs[static_cast<std::size_t>(member[k])];
         const int marker = markerOfBlob_[other][static_cast<std::size_t>(member[k])];
         discs[k].start_px = part.centre_px;
-        discs[k].radius_px = radiusOf(part);
+        discs[k].radius_px = part.discRadius_px();
         source[k] = -1;
         Ray partRay;
         if (marker < 0 || !stereo_.preparedBlob(1 - camera, member[k], partRay, unused)) {
@@ -227,7 +222,7 @@ void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int s
         discs[k].line = near->line;
         if (!part.split)
             discs[k].radius_px =
-                near->scale * radiusOf(blobs_[own][static_cast<std::size_t>(source[k])]);
+                near->scale * blobs_[own][static_cast<std::size_t>(source[k])].discRadius_px();
     }
     trySplits(image, camera, {sharedBlob, std::span(member.data(), members), -1}, sharedRay, discs,
               source, candidates, 1);
@@ -286,8 +281,8 @@ bool MarkerPipeline::trySplits(const ImageView& image, int camera, const SplitTa
         if (!near)
             return false;
         added[a] = {near->line, Vec2::Zero(),
-                    near->scale * radiusOf(blobs_[own][static_cast<std::size_t>(blob)]), false,
-                    false};
+                    near->scale * blobs_[own][static_cast<std::size_t>(blob)].discRadius_px(),
+                    false, false};
     }
     // Every added disc, then every one but one: a line of a blob whose disc is elsewhere (at
     // another depth) spoils the fit of all. The nearest lines are kept where room is short.

@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <numbers>
 
 #include "core/simd/neon.hpp"
 #include "core/triangulation.hpp"
@@ -17,12 +16,6 @@ constexpr std::size_t idx(int i) {
     return static_cast<std::size_t>(i);
 }
 constexpr std::size_t kMaxNeighbours = 32;
-
-/// The radius (px) of a disc of \a blob's area: a split part's and a cut disc's area is that of
-/// its fitted circle. 0 for a blob of no area (blobs made by hand, without pixels).
-double sizeRadius(const Blob& blob) {
-    return std::sqrt(static_cast<double>(blob.area_px) / std::numbers::pi);
-}
 
 // A blob's neighbourhood in region R as separate x and y arrays of offsets (rectified px), padded
 // to whole NEON vectors with far-away points that never win a minimum.
@@ -183,7 +176,7 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
         p.count[c] = std::min(blobs[c].size(), maxBlobs_);
         for (std::size_t i = 0; i < p.count[c]; ++i) {
             p.pixel[c][i] = blobs[c][i].centre_px;
-            p.radius[c][i] = sizeRadius(blobs[c][i]);
+            p.radius[c][i] = blobs[c][i].discRadius_px();
             p.taken[c][i] = false;
             p.refusedWith[c][i] = -1;
             p.valid[c][i] = false;
@@ -463,8 +456,8 @@ bool StereoMatcher::triangulateBlobs(const Blob& blob0, int i, const Blob& blob1
         ++counters_.unrectifiable;
         return false;
     }
-    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, sizeRadius(blob0),
-                       sizeRadius(blob1), marker))
+    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, blob0.discRadius_px(),
+                       blob1.discRadius_px(), marker))
         return false;
     marker.blob0 = i;
     marker.blob1 = j;

@@ -463,7 +463,7 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
     EXPECT_LT(blobs.size(), 12u) << "detection alone keeps a pair or more as one blob";
     const auto radiusOfTwin = [&](const sim::Glint& d, std::size_t k) {
         const Blob* twin = nearestBlob(blobs, d.centre_px + twinOffset[k]);
-        return std::sqrt(static_cast<double>(twin->area_px) / 3.14159265358979323846);
+        return twin->discRadius_px();
     };
     double sum2 = 0.0;
     for (const auto& pair : pairs) {
@@ -509,7 +509,7 @@ TEST(BlobDetector, PlacesNoDiscWithoutAnArcOfItsOwn) {
     std::array<DiscOnLine, 2> discs{};
     discs[0].line = lineThrough({100.3, 100.6}, {1.0, 0.0}, 3.0);
     discs[0].start_px = single->centre_px;
-    discs[0].radius_px = std::sqrt(static_cast<double>(single->area_px) / 3.14159265358979323846);
+    discs[0].radius_px = single->discRadius_px();
     discs[1].line = lineThrough({100.0, 103.5}, {1.0, 0.0}, 3.0);
     discs[1].radius_px = discs[0].radius_px;
     discs[1].known = false;
