@@ -24,6 +24,9 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , stereo_(rig, config.stereo, config.blobs.maxBlobs)
     , markers_(config.stereo.maxMarkers)
     , points_rig_mm_(config.stereo.maxMarkers)
+    , last_(config.stereo.maxMarkers)
+    , current_(config.stereo.maxMarkers)
+    , continuing_(config.stereo.maxMarkers)
     , markerOfBlob_{std::make_unique<int[]>(config.blobs.maxBlobs),
                     std::make_unique<int[]>(config.blobs.maxBlobs)} {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
@@ -57,12 +60,38 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
         stereo_.matchEpipolarOnly(blobs_[0].span(), blobs_[1].span(), markers_);
     else
         stereo_.match(blobs_[0].span(), blobs_[1].span(), markers_);
+    indexMarkersByBlob();
+    if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0)
+        preferContinuingPairs();
     if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
         images[1].pixels != nullptr)
         splitOnEpipolarLines(images);
     points_rig_mm_.clear();
     for (const StereoMarker& marker : markers_)
         points_rig_mm_.push_back(marker.position_rig_mm);
+    if (config_.stereo.continuity_mm > 0.0)
+        rememberForContinuity();
+}
+
+void MarkerPipeline::rememberForContinuity() {
+    // How long each point has continued a point of the frame before, and where it is expected in
+    // the next; then this frame becomes the last one, in order of expected x.
+    current_.clear();
+    for (const Vec3& point : points_rig_mm_) {
+        std::size_t at = 0;
+        LastPoint next{point, point, 0};
+        if (distanceToLastFrame(point, &at) <= config_.stereo.continuity_mm) {
+            next.age = last_[at].age + 1;
+            next.expected_rig_mm = point + (point - last_[at].position_rig_mm);
+        }
+        current_.push_back(next);
+    }
+    std::sort(current_.begin(), current_.end(), [](const LastPoint& a, const LastPoint& b) {
+        return a.expected_rig_mm.x() < b.expected_rig_mm.x();
+    });
+    last_.clear();
+    for (const LastPoint& point : current_)
+        last_.push_back(point);
 }
 
 namespace {
@@ -96,13 +125,134 @@ double MarkerPipeline::crossingOff(int camera, const Vec2& rectified_px,
                : std::numeric_limits<double>::infinity();
 }
 
-void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {
+void MarkerPipeline::indexMarkersByBlob() {
     for (std::size_t c = 0; c < 2; ++c)
         std::fill_n(markerOfBlob_[c].get(), blobs_[c].size(), -1);
     for (std::size_t m = 0; m < markers_.size(); ++m) {
         markerOfBlob_[0][static_cast<std::size_t>(markers_[m].blob0)] = static_cast<int>(m);
         markerOfBlob_[1][static_cast<std::size_t>(markers_[m].blob1)] = static_cast<int>(m);
     }
+}
+
+double MarkerPipeline::distanceToLastFrame(const Vec3& point_rig_mm,
+                                           std::size_t* nearestIndex) const {
+    // Only points within reach count: those expected within reach in x, a window of the sorted
+    // list.
+    const double reach_mm = config_.stereo.continuity_mm;
+    const auto first =
+        std::lower_bound(last_.begin(), last_.end(), point_rig_mm.x() - reach_mm,
+                         [](const LastPoint& p, double x) { return p.expected_rig_mm.x() < x; });
+    double nearest = std::numeric_limits<double>::infinity();
+    for (auto it = first;
+         it != last_.end() && it->expected_rig_mm.x() <= point_rig_mm.x() + reach_mm; ++it) {
+        const double d = (it->expected_rig_mm - point_rig_mm).squaredNorm();
+        if (d < nearest) {
+            nearest = d;
+            if (nearestIndex != nullptr)
+                *nearestIndex = static_cast<std::size_t>(it - last_.begin());
+        }
+    }
+    return std::sqrt(nearest);
+}
+
+bool MarkerPipeline::pairBlobs(int camera, int blob, int otherBlob, StereoMarker& marker) {
+    const auto b = static_cast<std::size_t>(blob), o = static_cast<std::size_t>(otherBlob);
+    return camera == 0
+               ? stereo_.triangulateBlobs(blobs_[0][b], blob, blobs_[1][o], otherBlob, marker)
+               : stereo_.triangulateBlobs(blobs_[0][o], otherBlob, blobs_[1][b], blob, marker);
+}
+
+double MarkerPipeline::continuedDistance(const Vec3& point_rig_mm, std::size_t m, int n) const {
+    constexpr double kNone = std::numeric_limits<double>::infinity();
+    std::size_t last = 0;
+    const double distance_mm = distanceToLastFrame(point_rig_mm, &last);
+    if (!(distance_mm <= config_.stereo.continuity_mm) || last_[last].age + 1 < kMinContinuedFrames)
+        return kNone;
+    // A point of the last frame that another of this frame's markers continues is taken: two
+    // markers continuing one would be one marker and a ghost beside it.
+    const Vec3& predicted_mm = last_[last].expected_rig_mm;
+    for (std::size_t other = 0; other < markers_.size(); ++other)
+        if (other != m && static_cast<int>(other) != n &&
+            (markers_[other].position_rig_mm - predicted_mm).norm() <= distance_mm)
+            return kNone;
+    return distance_mm;
+}
+
+void MarkerPipeline::preferContinuingPairs() {
+    if (last_.empty())
+        return;
+    const double band_px = config_.stereo.epipolarBand_sigmas * config_.stereo.sigmaEpipolar_px;
+    continuing_.clear();
+    for (const StereoMarker& marker : markers_)
+        continuing_.push_back(
+            distanceToLastFrame(marker.position_rig_mm) <= config_.stereo.continuity_mm ? 1 : 0);
+    for (std::size_t m = 0; m < markers_.size(); ++m) {
+        if (continuing_[m] != 0)
+            continue;
+        // The marker continues nothing. In either camera, another blob on the epipolar line of
+        // its blob in the other camera may be the partner that does: a blob without a partner,
+        // or the blob of another marker that continues nothing either, which then takes this
+        // marker's blob in exchange (two markers on one line, paired crosswise).
+        struct Choice {
+            double distance_mm = std::numeric_limits<double>::infinity();
+            StereoMarker marker, other;
+            int camera = -1, given = -1, taken = -1, n = -1;
+        } best;
+        for (int camera = 0; camera < 2; ++camera) {
+            const StereoMarker& marker = markers_[m];
+            const int own = camera == 0 ? marker.blob0 : marker.blob1;
+            const int kept = camera == 0 ? marker.blob1 : marker.blob0;
+            Ray ray;
+            Vec2 keptRectified;
+            if (!stereo_.preparedBlob(1 - camera, kept, ray, keptRectified))
+                continue;
+            for (std::size_t u = 0; u < blobs_[index(camera)].size(); ++u) {
+                const int blob = static_cast<int>(u);
+                Vec2 rectified;
+                const int n = markerOfBlob_[index(camera)][u];
+                if (blob == own || (n >= 0 && continuing_[static_cast<std::size_t>(n)] != 0) ||
+                    !stereo_.preparedBlob(camera, blob, ray, rectified) ||
+                    !(crossingOff(camera, rectified, keptRectified, band_px, 0.0) <
+                      std::numeric_limits<double>::infinity()))
+                    continue;
+                Choice choice;
+                if (!pairBlobs(camera, blob, kept, choice.marker))
+                    continue;
+                choice.distance_mm = continuedDistance(choice.marker.position_rig_mm, m, n);
+                if (n >= 0) {
+                    const StereoMarker& other = markers_[static_cast<std::size_t>(n)];
+                    if (!pairBlobs(camera, own, camera == 0 ? other.blob1 : other.blob0,
+                                   choice.other))
+                        continue;
+                    // The other marker need not continue anything: it may have come into
+                    // view as this one's partner hid it.
+                }
+                if (choice.distance_mm < best.distance_mm) {
+                    choice.camera = camera;
+                    choice.given = own;
+                    choice.taken = blob;
+                    choice.n = n;
+                    best = choice;
+                }
+            }
+        }
+        if (best.camera < 0)
+            continue;
+        const std::size_t own = index(best.camera);
+        markers_[m] = best.marker;
+        markerOfBlob_[own][static_cast<std::size_t>(best.taken)] = static_cast<int>(m);
+        markerOfBlob_[own][static_cast<std::size_t>(best.given)] = best.n;
+        continuing_[m] = 1;
+        ++pairsForContinuity_;
+        if (best.n >= 0) {
+            markers_[static_cast<std::size_t>(best.n)] = best.other;
+            continuing_[static_cast<std::size_t>(best.n)] = 1;
+            ++pairsForContinuity_;
+        }
+    }
+}
+
+void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {
     // Blobs with a partner first, each blob split into parts once (from its first part with a
     // partner): their discs are markers already. Then blobs refused as not round, then blobs
     // without a partner, which in a burst of reflections are many and mostly no marker's; the
@@ -402,6 +552,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
     }
     c.markerOverflow = stereo_.counters().markerOverflow;
     c.splitAttemptsSkipped = splitAttemptsSkipped_;
+    c.pairsForContinuity = pairsForContinuity_;
     return c;
 }
 

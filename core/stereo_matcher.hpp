@@ -37,6 +37,13 @@ struct StereoConfig {
     /// markers on one epipolar line. 0 turns the test off (flat markers, which the two cameras
     /// see at different slants).
     double maxSizeMismatch = 0.10;
+    /// Two markers on one epipolar line, one of them hidden from one camera, leave the other
+    /// marker's blob two partners that both triangulate, and the correspondence may take the
+    /// wrong one. A point within this distance (mm) of where a point of the last frame was
+    /// expected (its last step carried on) continues it; a pair whose point continues nothing
+    /// gives way to another pair of its blobs whose point continues a point that had continued
+    /// for ten frames (MarkerPipeline). 0 turns this off (frames that do not follow each other).
+    double continuity_mm = 3.0;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
 

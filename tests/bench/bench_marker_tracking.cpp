@@ -223,6 +223,34 @@ void BM_FrontEndTouching(benchmark::State& state) {
 }
 BENCHMARK(BM_FrontEndTouching)->ArgName("lines")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
+// The whole front end on the crowd (60-70 markers a frame), with and without the step that keeps
+// pairs whose points continue the last frame's (StereoConfig::continuity_mm): the difference is
+// what that step costs where it has the most points to compare.
+void BM_FrontEndCrowd(benchmark::State& state) {
+    constexpr std::uint64_t kFirstFrame = 650;
+    constexpr std::size_t kFrames = 32;
+    const FrameRun run("crowd", kFirstFrame, kFrames);
+    const int width_px = run.width_px();
+    MarkerPipelineConfig config;
+    config.stereo.continuity_mm = state.range(0) != 0 ? StereoConfig{}.continuity_mm : 0.0;
+    MarkerPipeline pipeline(run.world.rig(), config);
+    std::size_t frame = 0, markerCount = 0;
+    for (auto _ : state) {
+        const std::size_t f = frame % kFrames;
+        const std::array<ImageView, 2> views{
+            {{run.images[2 * f].data(), width_px}, {run.images[2 * f + 1].data(), width_px}}};
+        for (int c = 0; c < 2; ++c)
+            pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, width_px);
+        pipeline.matchStereo(StereoMethod::Svd, views);
+        benchmark::DoNotOptimize(pipeline.points_rig_mm().data());
+        markerCount += pipeline.markers().size();
+        ++frame;
+    }
+    state.counters["markers"] =
+        static_cast<double>(markerCount) / static_cast<double>(std::max<std::size_t>(frame, 1));
+}
+BENCHMARK(BM_FrontEndCrowd)->ArgName("continuity")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
 } // namespace
 
 BENCHMARK_MAIN();

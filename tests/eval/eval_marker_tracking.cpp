@@ -160,6 +160,9 @@ int main(int argc, char** argv) {
     app.add_option("--region", stereoConfig.neighbourhood_px, "S, side of region R (px)");
     app.add_option("--max-size-mismatch", stereoConfig.maxSizeMismatch,
                    "largest log ratio of the two blobs' radius times range (0: off)");
+    app.add_option("--continuity", stereoConfig.continuity_mm,
+                   "a pair continuing none of the last frame's markers gives way to one that "
+                   "continues one within this distance (mm; 0: off)");
     FrameToFrameConfig trackConfig;
     app.add_option("--sigma-t", trackConfig.sigma_mm, "sigma_t of eq. 5 (mm)");
     app.add_option("--gate", trackConfig.gate_mm, "frame-to-frame gate (mm)");
@@ -432,6 +435,8 @@ int main(int argc, char** argv) {
                 "not tried for the frame's budget: %llu\n",
                 static_cast<unsigned long long>(pc.splitOnLines),
                 static_cast<unsigned long long>(pc.splitAttemptsSkipped));
+    std::printf("  stereo pairs changed to continue a marker of the frame before: %llu\n",
+                static_cast<unsigned long long>(pc.pairsForContinuity));
     const BlobCounters& bc = pipeline.detector(0).counters();
     std::printf("  blobs (camera 0): accepted %llu, not round %llu (cut discs %llu), small %llu, "
                 "large %llu\n",
