@@ -629,6 +629,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsSplitOnLines = refused.splitOnLines;
     counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
     counters_.stereoPairsRefusedBySize = markers_.stereo().counters().rejectedSize;
+    counters_.stereoPairsForContinuity = refused.pairsForContinuity;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -737,6 +738,7 @@ std::string Firmware::statusReport() const {
     row("blobs split on the other camera's lines", c.blobsSplitOnLines);
     row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);
     row("stereo pairs refused: blob sizes fit no one marker", c.stereoPairsRefusedBySize);
+    row("stereo pairs changed to continue a marker", c.stereoPairsForContinuity);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

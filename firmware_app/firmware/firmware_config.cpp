@@ -99,6 +99,7 @@ void readStereo(Section& s, StereoConfig& c) {
     s.real("max_ray_gap_mm", c.maxRayGap_mm, 0.0, Section::kNoLimit, true);
     s.real("max_reprojection_px", c.maxReprojection_px, 0.0, Section::kNoLimit, true);
     s.real("max_size_mismatch", c.maxSizeMismatch, 0.0, Section::kNoLimit);
+    s.real("continuity_mm", c.continuity_mm, 0.0, Section::kNoLimit);
     s.integer("max_markers", c.maxMarkers, 1, 65535);
     s.require(c.maxDepth_mm > c.minDepth_mm, "max_depth_mm", "must be > min_depth_mm");
 }
