@@ -6,8 +6,9 @@
 //                 [--require-position-rms 0.3] [--require-rotation-rms 0.2]
 //
 // Models come from MODELDIR (written by `edgetrack calibrate`), or from a calibration run of N
-// frames of the same scene with another seed at the same level (the ObjectCalibrator and model
-// export that `edgetrack calibrate` runs; at images level this saves writing gigabytes of images),
+// frames of the same scene with another seed at the same level (the CalibrationSession, online
+// stage and completion, that `edgetrack calibrate` runs; at images level this saves writing
+// gigabytes of images),
 // or else from the true layouts (every pair co-visible, S_min by the analysis calibrate uses),
 // which isolates the tracker from the calibration. Each model is laid onto the true layout it
 // matches (copies of one layout are told apart by where they are first found). Per body and frame:
@@ -28,8 +29,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/calibration_session.hpp"
 #include "core/model_tracker.hpp"
-#include "core/object_calibrator.hpp"
 #include "core/stereo_matcher.hpp"
 #include "firmware_app/formats/model_file.hpp"
 #include "hal/sim/levels.hpp"
@@ -76,23 +77,22 @@ double rms(const std::vector<double>& values) {
     return values.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(values.size()));
 }
 
-/// Object calibration over \a frames frames of \a sceneName (seed \a seed), as `calibrate` runs it.
+/// Object calibration over \a frames frames of \a sceneName (seed \a seed), as `calibrate` runs
+/// it: the online stage, then completion over every frame of the session.
 std::vector<MarkerModel> calibrate(const std::string& sceneName, std::uint64_t seed,
                                    std::int64_t frames, const std::string& level) {
     const sim::World world(*sim::makeScene(sceneName, seed), seed);
     test::SimFrames source(world, seed, level == "images");
-    const CalibrationConfig config;
-    ObjectCalibrator calibrator(config);
+    CalibrationSession session(CalibrationConfig{}, CompletionConfig{},
+                               static_cast<std::size_t>(frames),
+                               static_cast<std::size_t>(frames) * 256);
     std::vector<Vec3> points;
     sim::Observation observation;
     for (std::int64_t f = 0; f < frames; ++f) {
         source.next(static_cast<std::uint64_t>(f), observation, points);
-        calibrator.update(observation.time_s, points);
+        session.update(observation.time_s, points);
     }
-    std::vector<MarkerModel> models;
-    for (std::size_t i = 0; i < config.maxObjects; ++i)
-        models.emplace_back(config.maxMarkersPerObject);
-    models.resize(calibrator.exportModels(models));
+    std::vector<MarkerModel> models = session.complete();
     std::printf("calibrated on %lld frames of seed %llu: %zu models\n",
                 static_cast<long long>(frames), static_cast<unsigned long long>(seed),
                 models.size());
