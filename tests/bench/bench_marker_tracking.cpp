@@ -193,24 +193,17 @@ void BM_StereoAndFrameToFrame(benchmark::State& state) {
 }
 BENCHMARK(BM_StereoAndFrameToFrame)->Unit(benchmark::kMicrosecond);
 
-// The whole front end (both images' blobs, stereo) on the touching scene, where a third of the
-// markers touch another in one image, over 32 consecutive frames. With "lines" set, stereo goes
-// back to the images and splits blobs on the other camera's epipolar lines: the difference is
-// what that pass costs.
-void BM_FrontEndTouching(benchmark::State& state) {
-    constexpr std::uint64_t kFirstFrame = 300;
-    constexpr std::size_t kFrames = 32;
-    const FrameRun run("touching", kFirstFrame, kFrames);
-    const sim::World& world = run.world;
-    const std::vector<std::vector<std::uint8_t>>& images = run.images;
+/// Runs \a pipeline's whole front end (both images' blobs, stereo) over \a run's frames in turn,
+/// giving stereo the images when \a lines (the split on epipolar lines goes back to them).
+void runFrontEnd(benchmark::State& state, const FrameRun& run, MarkerPipeline& pipeline,
+                 bool lines) {
+    const std::size_t frames = run.images.size() / 2;
     const int width_px = run.width_px();
-    MarkerPipeline pipeline(world.rig(), MarkerPipelineConfig{});
-    const bool lines = state.range(0) != 0;
     std::size_t frame = 0, markerCount = 0;
     for (auto _ : state) {
-        const std::size_t f = frame % kFrames;
+        const std::size_t f = frame % frames;
         const std::array<ImageView, 2> views{
-            {{images[2 * f].data(), width_px}, {images[2 * f + 1].data(), width_px}}};
+            {{run.images[2 * f].data(), width_px}, {run.images[2 * f + 1].data(), width_px}}};
         for (int c = 0; c < 2; ++c)
             pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, width_px);
         pipeline.matchStereo(StereoMethod::Svd, lines ? views : std::array<ImageView, 2>{});
@@ -221,33 +214,26 @@ void BM_FrontEndTouching(benchmark::State& state) {
     state.counters["markers"] =
         static_cast<double>(markerCount) / static_cast<double>(std::max<std::size_t>(frame, 1));
 }
+
+// The whole front end on the touching scene, where a third of the markers touch another in one
+// image, over 32 consecutive frames. With "lines" set, stereo goes back to the images and splits
+// blobs on the other camera's epipolar lines: the difference is what that pass costs.
+void BM_FrontEndTouching(benchmark::State& state) {
+    const FrameRun run("touching", 300, 32);
+    MarkerPipeline pipeline(run.world.rig(), MarkerPipelineConfig{});
+    runFrontEnd(state, run, pipeline, state.range(0) != 0);
+}
 BENCHMARK(BM_FrontEndTouching)->ArgName("lines")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 // The whole front end on the crowd (60-70 markers a frame), with and without the step that keeps
 // pairs whose points continue the last frame's (StereoConfig::continuity_mm): the difference is
 // what that step costs where it has the most points to compare.
 void BM_FrontEndCrowd(benchmark::State& state) {
-    constexpr std::uint64_t kFirstFrame = 650;
-    constexpr std::size_t kFrames = 32;
-    const FrameRun run("crowd", kFirstFrame, kFrames);
-    const int width_px = run.width_px();
+    const FrameRun run("crowd", 650, 32);
     MarkerPipelineConfig config;
     config.stereo.continuity_mm = state.range(0) != 0 ? StereoConfig{}.continuity_mm : 0.0;
     MarkerPipeline pipeline(run.world.rig(), config);
-    std::size_t frame = 0, markerCount = 0;
-    for (auto _ : state) {
-        const std::size_t f = frame % kFrames;
-        const std::array<ImageView, 2> views{
-            {{run.images[2 * f].data(), width_px}, {run.images[2 * f + 1].data(), width_px}}};
-        for (int c = 0; c < 2; ++c)
-            pipeline.detectBlobs(c, views[static_cast<std::size_t>(c)].pixels, width_px);
-        pipeline.matchStereo(StereoMethod::Svd, views);
-        benchmark::DoNotOptimize(pipeline.points_rig_mm().data());
-        markerCount += pipeline.markers().size();
-        ++frame;
-    }
-    state.counters["markers"] =
-        static_cast<double>(markerCount) / static_cast<double>(std::max<std::size_t>(frame, 1));
+    runFrontEnd(state, run, pipeline, true);
 }
 BENCHMARK(BM_FrontEndCrowd)->ArgName("continuity")->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
