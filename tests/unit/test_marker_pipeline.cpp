@@ -244,6 +244,47 @@ TEST(MarkerPipeline, KeepsAMarkersPartnerWhenAnotherMarkerComesIntoViewOnItsLine
     }
 }
 
+TEST(MarkerPipeline, PairsTwoMarkersOnOneLineByTheMarkerThatWasThere) {
+    // Marker A moves along, seen by both cameras. From frame 30, marker C comes into view beside
+    // it, on the same epipolar plane, 3 mm across and 40 mm deeper: in both images C's blob lies
+    // on A's line near A's, and the correspondence pairs the four blobs crosswise (the
+    // neighbourhood term finds each blob's neighbour where the crossed pair puts it), two ghosts
+    // at neither marker. The frame before has A where its own pair puts it.
+    const StereoRig rig = test::desktopRig();
+    const Vec3 c0 = rig.camera(0).centre_rig_mm();
+    const Vec3 c1 = rig.camera(1).centre_rig_mm();
+    for (const double continuity_mm : {0.0, 3.0}) {
+        MarkerPipelineConfig config;
+        config.stereo.maxSizeMismatch = 0.0;
+        config.stereo.continuity_mm = continuity_mm;
+        MarkerPipeline pipeline(rig, config);
+        int ghosts = 0;
+        for (int frame = 0; frame < 50; ++frame) {
+            const Vec3 a(40.0 + 0.5 * frame, 10.0, 480.0);
+            const Vec3 c = a - 3.0 * (c1 - c0).normalized() + 40.0 * (a - c0).normalized();
+            for (int camera = 0; camera < 2; ++camera) {
+                pipeline.blobs(camera).clear();
+                pipeline.blobs(camera).push_back(sphereBlob(rig, camera, a));
+                if (frame >= 30)
+                    pipeline.blobs(camera).push_back(sphereBlob(rig, camera, c));
+            }
+            pipeline.matchStereo();
+            for (const Vec3& point : pipeline.points_rig_mm())
+                ghosts += std::min((point - a).norm(), (point - c).norm()) > 1.0 ? 1 : 0;
+            if (frame < 30) {
+                ASSERT_EQ(pipeline.points_rig_mm().size(), 1U) << frame;
+            }
+        }
+        if (continuity_mm > 0.0) {
+            EXPECT_EQ(ghosts, 0);
+            // Both pairs changed in each of the 20 frames: the correspondence crosses them anew.
+            EXPECT_EQ(pipeline.counters().pairsForContinuity, 40U);
+        } else {
+            EXPECT_GT(ghosts, 20); // the scene does make ghosts
+        }
+    }
+}
+
 TEST(MarkerPipeline, AFrameAllocatesNothing) {
     RenderedFrames frames;
     MarkerPipeline pipeline(frames.world().rig(), MarkerPipelineConfig{});
