@@ -256,8 +256,17 @@ private:
     /// \brief Every alive body posed, in the frames the tracker did not find it, from three
     /// points that match a triangle of its layout that no other triangle of any body resembles.
     void poseFromTriangles(const SessionBuffer& session);
-    void poseFromTriangles(const SessionBuffer& session, Body& body,
-                           std::span<const completion_detail::SortedTriangle> own);
+    /// A body to pose from triangles, and what poseFromTriangles() gathers for it.
+    struct TriangleJob;
+    void poseFromTriangles(const SessionBuffer& session, std::vector<TriangleJob>& jobs);
+    /// Frame \a f's pose of \a job's body from the frame's points \a free and their triangles
+    /// \a seenTriangles, if one pose is best.
+    void poseFromTriangles(std::span<const Vec3> free,
+                           std::span<const completion_detail::SortedTriangle> seenTriangles,
+                           TriangleJob& job, std::size_t f) const;
+    /// The poses from triangles that lie in runs of poses following on from each other, into
+    /// \a job's body.
+    void keepTriangleRuns(TriangleJob& job);
     /// \brief New bodies from sets of four or more points that no body explains, that keep their
     /// distances while they move over a third of a second; each tracked through the session.
     void discoverBodies(const SessionBuffer& session);

@@ -15,6 +15,20 @@ using namespace completion_detail;
 // ---------------------------------------------------------------------------------------------
 // Poses from three markers
 
+struct CalibrationCompletion::TriangleJob {
+    Body* body = nullptr;
+    /// Its triangles that no other triangle of any body resembles, by longest side.
+    std::vector<SortedTriangle> own;
+    /// The longest side of those, plus the tolerance (mm).
+    double longest = 0.0;
+    Extent ball;
+    /// Per marker, the directions it was seen from in the frames posed so far (body frame).
+    std::vector<std::vector<Vec3>> seenFrom;
+    /// Per frame, whether three points posed it, and the pose.
+    std::vector<std::uint8_t> seeded;
+    std::vector<RigidTransform> seed;
+};
+
 void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
     const std::size_t frames = session.frames();
     if (frames < config_.minTriangleRun)
@@ -38,131 +52,170 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
                 all[i].unique = false;
                 all[j].unique = false;
             }
-    std::vector<SortedTriangle> own;
+    std::vector<TriangleJob> jobs;
     for (std::size_t index = 0; index < bodies_.size(); ++index) {
         if (!bodies_[index].alive)
             continue;
-        own.clear();
+        TriangleJob job;
+        job.body = &bodies_[index];
         for (const SortedTriangle& t : all)
             if (t.body == index && t.unique && wellShaped(t, tol))
-                own.push_back(t);
-        if (!own.empty())
-            poseFromTriangles(session, bodies_[index], own);
+                job.own.push_back(t);
+        if (!job.own.empty())
+            jobs.push_back(std::move(job));
     }
+    poseFromTriangles(session, jobs);
 }
 
-void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session, Body& body,
-                                              std::span<const SortedTriangle> own) {
+void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
+                                              std::vector<TriangleJob>& jobs) {
     const std::size_t frames = session.frames();
     const double tol = config_.triangleTolerance_mm;
-    const double longest = own.back().sides_mm[2] + tol;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
-    const Extent ball = extentOf(body.markers_mm);
-
-    // The directions each marker was seen from in the frames posed so far (body frame, thinned).
-    // Three points of something else that match a triangle by chance put the body in a random
-    // attitude, from which its markers were hardly ever seen; three of its own markers are seen
-    // from about where they were seen before.
     constexpr double kDegree = std::numbers::pi / 180.0;
     const double thinning = std::cos(0.25 * config_.triangleViewAngle_deg * kDegree);
-    const double sameView = std::cos(config_.triangleViewAngle_deg * kDegree);
-    std::vector<std::vector<Vec3>> seenFrom(body.markers_mm.size());
-    for (std::size_t f = 0; f < frames; ++f) {
-        if (!body.posed[f])
-            continue;
-        const RigidTransform& T_rig_from_body = body.T_rig_from_body[f];
-        const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
-        for (std::size_t m = 0; m < body.markers_mm.size(); ++m) {
-            if (nearestPoint(session.points(f), T_rig_from_body.apply(body.markers_mm[m]),
-                             radius) == nullptr)
+    for (TriangleJob& job : jobs) {
+        const Body& body = *job.body;
+        job.longest = job.own.back().sides_mm[2] + tol;
+        job.ball = extentOf(body.markers_mm);
+        // The directions each marker was seen from in the frames posed so far (body frame,
+        // thinned). Three points of something else that match a triangle by chance put the body
+        // in a random attitude, from which its markers were hardly ever seen; three of its own
+        // markers are seen from about where they were seen before.
+        job.seenFrom.assign(body.markers_mm.size(), {});
+        for (std::size_t f = 0; f < frames; ++f) {
+            if (!body.posed[f])
                 continue;
-            keepViewDirection(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), thinning);
+            const RigidTransform& T_rig_from_body = body.T_rig_from_body[f];
+            const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
+            for (std::size_t m = 0; m < body.markers_mm.size(); ++m) {
+                if (nearestPoint(session.points(f), T_rig_from_body.apply(body.markers_mm[m]),
+                                 radius) == nullptr)
+                    continue;
+                keepViewDirection(job.seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(),
+                                  thinning);
+            }
         }
+        job.seeded.assign(frames, 0);
+        job.seed.resize(frames);
     }
-    auto seenFromHere = [&](const RigidTransform& T_rig_from_body, std::uint32_t m) {
-        const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
-        return seenFromNear(seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(), sameView);
-    };
 
     // Points another body's pose explains are looked at too: where two pieces of one object
     // share markers, the tracker gives the shared points to one of them only, and the other piece
-    // would never be seen posed with it.
-    std::vector<std::uint8_t> seeded(frames, 0);
-    std::vector<RigidTransform> seed(frames);
+    // would never be seen posed with it. So a frame's triangles of points are the same for every
+    // body, and are made once.
+    std::vector<SortedTriangle> seenTriangles;
     for (std::size_t f = 0; f < frames; ++f) {
         const std::span<const Vec3> free = session.points(f);
-        if (body.posed[f] || free.size() < 3 || free.size() > config_.maxTrianglePoints)
+        if (free.size() < 3 || free.size() > config_.maxTrianglePoints)
             continue;
-        // Every triple of points that stands for one triangle of the body: the pose that puts the
-        // most markers on points wins; two different poses that do equally well, none.
-        std::size_t bestSupport = 0;
-        bool tie = false;
-        std::optional<RigidTransform> best;
+        double longest = 0.0;
+        for (const TriangleJob& job : jobs)
+            if (!job.body->posed[f])
+                longest = std::max(longest, job.longest);
+        if (!(longest > 0.0))
+            continue;
+        seenTriangles.clear();
         for (std::uint32_t i = 0; i < free.size(); ++i)
             for (std::uint32_t j = i + 1; j < free.size(); ++j) {
                 if ((free[i] - free[j]).norm() > longest)
                     continue;
                 for (std::uint32_t k = j + 1; k < free.size(); ++k) {
                     const SortedTriangle seen = sortedTriangle(free[i], free[j], free[k], i, j, k);
-                    if (seen.sides_mm[2] > longest)
-                        continue;
-                    auto it = std::lower_bound(
-                        own.begin(), own.end(), seen.sides_mm[2] - tol,
-                        [](const SortedTriangle& t, double s) { return t.sides_mm[2] < s; });
-                    for (; it != own.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
-                        if (!congruent(*it, seen, tol))
-                            continue;
-                        const std::array<Vec3, 3> from = {body.markers_mm[it->corners[0]],
-                                                          body.markers_mm[it->corners[1]],
-                                                          body.markers_mm[it->corners[2]]};
-                        const std::array<Vec3, 3> to = {
-                            free[seen.corners[0]], free[seen.corners[1]], free[seen.corners[2]]};
-                        const std::optional<RigidFit> fit = fitRigid(from, to);
-                        if (!fit || !seenFromHere(fit->transform, it->corners[0]) ||
-                            !seenFromHere(fit->transform, it->corners[1]) ||
-                            !seenFromHere(fit->transform, it->corners[2]))
-                            continue;
-                        std::size_t support = 0;
-                        for (const Vec3& m : body.markers_mm)
-                            support +=
-                                nearestPoint(free, fit->transform.apply(m), radius) != nullptr;
-                        if (support > bestSupport) {
-                            bestSupport = support;
-                            best = fit->transform;
-                            tie = false;
-                        } else if (support == bestSupport && best &&
-                                   disagreement_mm(*best, fit->transform, ball) > radius) {
-                            tie = true;
-                        }
-                    }
+                    if (seen.sides_mm[2] <= longest)
+                        seenTriangles.push_back(seen);
                 }
             }
-        if (best && !tie) {
-            seeded[f] = 1;
-            seed[f] = *best;
-        }
+        for (TriangleJob& job : jobs)
+            if (!job.body->posed[f])
+                poseFromTriangles(free, seenTriangles, job, f);
     }
 
+    for (TriangleJob& job : jobs)
+        keepTriangleRuns(job);
+}
+
+void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
+                                              std::span<const SortedTriangle> seenTriangles,
+                                              TriangleJob& job, std::size_t f) const {
+    const Body& body = *job.body;
+    const double tol = config_.triangleTolerance_mm;
+    const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
+    constexpr double kDegree = std::numbers::pi / 180.0;
+    const double sameView = std::cos(config_.triangleViewAngle_deg * kDegree);
+    auto seenFromHere = [&](const RigidTransform& T_rig_from_body, std::uint32_t m) {
+        const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
+        return seenFromNear(job.seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(),
+                            sameView);
+    };
+    // Every triple of points that stands for one triangle of the body: the pose that puts the
+    // most markers on points wins; two different poses that do equally well, none.
+    std::size_t bestSupport = 0;
+    bool tie = false;
+    std::optional<RigidTransform> best;
+    const std::span<const SortedTriangle> own = job.own;
+    for (const SortedTriangle& seen : seenTriangles) {
+        if (seen.sides_mm[2] > job.longest)
+            continue;
+        auto it =
+            std::lower_bound(own.begin(), own.end(), seen.sides_mm[2] - tol,
+                             [](const SortedTriangle& t, double s) { return t.sides_mm[2] < s; });
+        for (; it != own.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
+            if (!congruent(*it, seen, tol))
+                continue;
+            const std::array<Vec3, 3> from = {body.markers_mm[it->corners[0]],
+                                              body.markers_mm[it->corners[1]],
+                                              body.markers_mm[it->corners[2]]};
+            const std::array<Vec3, 3> to = {free[seen.corners[0]], free[seen.corners[1]],
+                                            free[seen.corners[2]]};
+            const std::optional<RigidFit> fit = fitRigid(from, to);
+            if (!fit || !seenFromHere(fit->transform, it->corners[0]) ||
+                !seenFromHere(fit->transform, it->corners[1]) ||
+                !seenFromHere(fit->transform, it->corners[2]))
+                continue;
+            std::size_t support = 0;
+            for (const Vec3& m : body.markers_mm)
+                support += nearestPoint(free, fit->transform.apply(m), radius) != nullptr;
+            if (support > bestSupport) {
+                bestSupport = support;
+                best = fit->transform;
+                tie = false;
+            } else if (support == bestSupport && best &&
+                       disagreement_mm(*best, fit->transform, job.ball) > radius) {
+                tie = true;
+            }
+        }
+    }
+    if (best && !tie) {
+        job.seeded[f] = 1;
+        job.seed[f] = *best;
+    }
+}
+
+void CalibrationCompletion::keepTriangleRuns(TriangleJob& job) {
     // Three points that happen to fit a triangle for a frame or two pose nothing: only a run of
     // frames, posed so or by the tracker, whose poses follow on from each other as a moving body's
     // do, is taken.
+    Body& body = *job.body;
+    const std::size_t frames = job.seeded.size();
     auto poseAt = [&](std::size_t f) -> const RigidTransform& {
-        return seeded[f] ? seed[f] : body.T_rig_from_body[f];
+        return job.seeded[f] ? job.seed[f] : body.T_rig_from_body[f];
     };
     for (std::size_t f = 0; f < frames;) {
-        if (!seeded[f] && !body.posed[f]) {
+        if (!job.seeded[f] && !body.posed[f]) {
             ++f;
             continue;
         }
         std::size_t end = f + 1;
-        while (end < frames && (seeded[end] || body.posed[end]) &&
-               disagreement_mm(poseAt(end - 1), poseAt(end), ball) <= config_.maxTriangleStep_mm)
+        while (end < frames && (job.seeded[end] || body.posed[end]) &&
+               disagreement_mm(poseAt(end - 1), poseAt(end), job.ball) <=
+                   config_.maxTriangleStep_mm)
             ++end;
         if (end - f >= config_.minTriangleRun)
             for (std::size_t g = f; g < end; ++g)
-                if (seeded[g]) {
+                if (job.seeded[g]) {
                     body.posed[g] = 1;
-                    body.T_rig_from_body[g] = seed[g];
+                    body.T_rig_from_body[g] = job.seed[g];
                     ++counters_.framesFromTriangles;
                 }
         f = end;
