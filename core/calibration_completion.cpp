@@ -317,12 +317,24 @@ void CalibrationCompletion::trackBothWays(const SessionBuffer& session,
     // Forwards, then backwards in time; each frame takes whichever pass matched more markers over
     // all models, as a whole, so that no point serves two bodies in one frame.
     std::vector<std::uint32_t> forwardMarkers(frames, 0);
+    // A body tracked alone has every point of a frame to itself, so whether the frame holds any
+    // four points its layout could stand for does not depend on what came before: where the
+    // forward pass searched it in full and found no such four, the backward pass need not look.
+    const bool alone = models.size() == 1;
+    std::vector<std::uint8_t> nothingToFind(alone ? frames : 0, 0);
     {
         ModelTracker tracker(models, config_.tracking);
         if (!tracker.isValid())
             return;
         for (std::size_t f = 0; f < frames; ++f) {
+            const ModelTrackingCounters before = tracker.counters();
             tracker.update(session.time_s(f), session.points(f));
+            const ModelTrackingCounters& after = tracker.counters();
+            if (alone)
+                nothingToFind[f] = after.searches == before.searches + 1 &&
+                                   after.hypotheses == before.hypotheses &&
+                                   after.searchesSkipped == before.searchesSkipped &&
+                                   after.budgetExhausted == before.budgetExhausted;
             for (std::size_t b = 0; b < tracks.size(); ++b) {
                 const TrackedBody& tracked = tracker.bodies()[b];
                 if (!tracked.found())
@@ -336,7 +348,7 @@ void CalibrationCompletion::trackBothWays(const SessionBuffer& session,
     ModelTracker tracker(models, config_.tracking);
     for (std::size_t step = 0; step < frames; ++step) {
         const std::size_t f = frames - 1 - step;
-        tracker.update(-session.time_s(f), session.points(f));
+        tracker.update(-session.time_s(f), session.points(f), !(alone && nothingToFind[f]));
         std::uint32_t total = 0;
         for (const TrackedBody& tracked : tracker.bodies())
             if (tracked.found())

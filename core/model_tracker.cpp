@@ -137,7 +137,7 @@ void ModelTracker::reset() {
     }
 }
 
-void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
+void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm, bool searchLost) {
     if (!valid_)
         return;
     ++counters_.frames;
@@ -163,7 +163,7 @@ void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm) {
     }
 
     for (std::size_t b = 0; b < bodies_.size(); ++b) {
-        if (bodies_[b].found() || models_.slots[b].markerCount < 4)
+        if (bodies_[b].found() || models_.slots[b].markerCount < 4 || !searchLost)
             continue;
         if (!budgetLeft()) {
             ++counters_.searchesSkipped;

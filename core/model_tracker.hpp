@@ -141,8 +141,10 @@ public:
      * \brief Track one frame.
      * \param time_s frame time (s), increasing.
      * \param points_rig_mm the frame's 3D markers, rig frame (mm), in any order.
+     * \param searchLost false to leave the bodies that their predictions do not confirm unfound
+     * in this frame, without a search (offline passes that search only every few frames).
      */
-    void update(double time_s, std::span<const Vec3> points_rig_mm);
+    void update(double time_s, std::span<const Vec3> points_rig_mm, bool searchLost = true);
 
     /// \brief Forget every body's history (as after a gap in the data).
     void reset();
