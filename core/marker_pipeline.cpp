@@ -89,9 +89,7 @@ void MarkerPipeline::rememberForContinuity() {
     std::sort(current_.begin(), current_.end(), [](const LastPoint& a, const LastPoint& b) {
         return a.expected_rig_mm.x() < b.expected_rig_mm.x();
     });
-    last_.clear();
-    for (const LastPoint& point : current_)
-        last_.push_back(point);
+    std::swap(last_, current_);
 }
 
 namespace {
@@ -155,11 +153,16 @@ double MarkerPipeline::distanceToLastFrame(const Vec3& point_rig_mm,
     return std::sqrt(nearest);
 }
 
+bool MarkerPipeline::pairBlobs(int camera, const Blob& blob, int at, const Blob& otherBlob,
+                               int otherAt, StereoMarker& marker) {
+    return camera == 0 ? stereo_.triangulateBlobs(blob, at, otherBlob, otherAt, marker)
+                       : stereo_.triangulateBlobs(otherBlob, otherAt, blob, at, marker);
+}
+
 bool MarkerPipeline::pairBlobs(int camera, int blob, int otherBlob, StereoMarker& marker) {
-    const auto b = static_cast<std::size_t>(blob), o = static_cast<std::size_t>(otherBlob);
-    return camera == 0
-               ? stereo_.triangulateBlobs(blobs_[0][b], blob, blobs_[1][o], otherBlob, marker)
-               : stereo_.triangulateBlobs(blobs_[0][o], otherBlob, blobs_[1][b], blob, marker);
+    return pairBlobs(camera, blobs_[index(camera)][static_cast<std::size_t>(blob)], blob,
+                     blobs_[index(1 - camera)][static_cast<std::size_t>(otherBlob)], otherBlob,
+                     marker);
 }
 
 double MarkerPipeline::continuedDistance(const Vec3& point_rig_mm, std::size_t m, int n) const {
@@ -500,10 +503,7 @@ bool MarkerPipeline::splitAndPair(const ImageView& image, int camera, const Spli
                                    : static_cast<int>(otherBlobs.size());
         const Blob& partner = blobs_[own][static_cast<std::size_t>(source[k])];
         StereoMarker marker;
-        const bool ok = camera == 0
-                            ? stereo_.triangulateBlobs(partner, source[k], parts[k], at, marker)
-                            : stereo_.triangulateBlobs(parts[k], at, partner, source[k], marker);
-        if (!ok)
+        if (!pairBlobs(camera, partner, source[k], parts[k], at, marker))
             return;
         const auto place = static_cast<std::size_t>(at);
         if (isMember) {

@@ -140,7 +140,11 @@ private:
     /// the other camera), or the blob of another marker that continues nothing either, which
     /// takes this marker's blob in exchange (two markers on one line, paired crosswise).
     void preferContinuingPairs();
-    /// Triangulate blob \a blob of \a camera with blob \a otherBlob of the other camera.
+    /// Triangulate \a blob of \a camera (its index \a at) with \a otherBlob of the other camera
+    /// (\a otherAt), whichever camera is camera 0.
+    bool pairBlobs(int camera, const Blob& blob, int at, const Blob& otherBlob, int otherAt,
+                   StereoMarker& marker);
+    /// The same for blob \a blob of \a camera and blob \a otherBlob of the other camera.
     bool pairBlobs(int camera, int blob, int otherBlob, StereoMarker& marker);
     /// How far (mm) \a point_rig_mm lies from where a point of the last frame that had continued
     /// kMinContinuedFrames was expected, when within StereoConfig::continuity_mm and no marker
@@ -228,7 +232,8 @@ private:
         Vec3 expected_rig_mm = Vec3::Zero();
         std::uint32_t age = 0;
     };
-    /// The last frame's points in order of expected x, and this frame's while it is remembered.
+    /// The last frame's points in order of expected x, and this frame's while it is remembered
+    /// (the two swap their storage).
     BoundedVector<LastPoint> last_;
     BoundedVector<LastPoint> current_;
     /// Per marker of this frame, during preferContinuingPairs(): whether it continues a point.
