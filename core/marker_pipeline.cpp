@@ -27,6 +27,8 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , last_(config.stereo.maxMarkers)
     , current_(config.stereo.maxMarkers)
     , continuing_(config.stereo.maxMarkers)
+    , lastContinued_(config.stereo.maxMarkers)
+    , lastStep_(config.stereo.maxMarkers)
     , markerOfBlob_{std::make_unique<int[]>(config.blobs.maxBlobs),
                     std::make_unique<int[]>(config.blobs.maxBlobs)} {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
@@ -66,6 +68,9 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
     if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
         images[1].pixels != nullptr)
         splitOnEpipolarLines(images);
+    if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
+        config_.stereo.maxCarriedFrames > 0)
+        carryHiddenMarkers(images);
     points_rig_mm_.clear();
     for (const StereoMarker& marker : markers_)
         points_rig_mm_.push_back(marker.position_rig_mm);
@@ -77,12 +82,14 @@ void MarkerPipeline::rememberForContinuity() {
     // How long each point has continued a point of the frame before, and where it is expected in
     // the next; then this frame becomes the last one, in order of expected x.
     current_.clear();
-    for (const Vec3& point : points_rig_mm_) {
+    for (std::size_t m = 0; m < points_rig_mm_.size(); ++m) {
+        const Vec3& point = points_rig_mm_[m];
         std::size_t at = 0;
-        LastPoint next{point, point, 0};
+        LastPoint next{point, point, 0, 0};
         if (distanceToLastFrame(point, &at) <= config_.stereo.continuity_mm) {
             next.age = last_[at].age + 1;
             next.expected_rig_mm = point + (point - last_[at].position_rig_mm);
+            next.carried = markers_[m].carried ? last_[at].carried + 1 : 0;
         }
         current_.push_back(next);
     }
@@ -252,6 +259,120 @@ void MarkerPipeline::preferContinuingPairs() {
             continuing_[static_cast<std::size_t>(best.n)] = 1;
             ++pairsForContinuity_;
         }
+    }
+}
+
+bool MarkerPipeline::mergedBlobAt(int camera, const Vec2& pixel_px, int& blob) const {
+    const auto holds = [&](const Blob& b) {
+        return pixel_px.x() >= b.left - 0.5 && pixel_px.x() <= b.right + 0.5 &&
+               pixel_px.y() >= b.top - 0.5 && pixel_px.y() <= b.bottom + 0.5;
+    };
+    // Parts of a split blob keep the whole blob's bounds.
+    const BoundedVector<Blob>& blobs = blobs_[index(camera)];
+    for (std::size_t b = 0; b < blobs.size(); ++b)
+        if (blobs[b].split && holds(blobs[b])) {
+            blob = static_cast<int>(b);
+            return true;
+        }
+    blob = -1;
+    for (const Blob& refused : detectors_[index(camera)].refused())
+        if (holds(refused))
+            return true;
+    return false;
+}
+
+Vec3 MarkerPipeline::neighboursStep(std::size_t hidden) const {
+    // Weighted by nearness, so that the markers of its own object count most where objects pass
+    // each other.
+    const Vec3& from_rig_mm = last_[hidden].position_rig_mm;
+    Vec3 sum_mm = Vec3::Zero();
+    double weights = 0.0;
+    for (std::size_t j = 0; j < last_.size(); ++j) {
+        const double distance_mm = (last_[j].position_rig_mm - from_rig_mm).norm();
+        if (lastContinued_[j] == 0 || distance_mm > kNeighbourhood_mm)
+            continue;
+        const double weight = 1.0 / (distance_mm + 5.0);
+        sum_mm += weight * lastStep_[j];
+        weights += weight;
+    }
+    return weights > 0.0 ? Vec3(sum_mm / weights) : Vec3::Zero();
+}
+
+void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) {
+    if (last_.empty())
+        return;
+    const double reach_mm = config_.stereo.continuity_mm;
+    lastContinued_.clear();
+    for (std::size_t i = 0; i < last_.size(); ++i)
+        lastContinued_.push_back(0);
+    lastStep_.clear();
+    for (std::size_t i = 0; i < last_.size(); ++i)
+        lastStep_.push_back(Vec3::Zero());
+    for (const StereoMarker& marker : markers_) {
+        std::size_t at = 0;
+        if (distanceToLastFrame(marker.position_rig_mm, &at) <= reach_mm) {
+            lastContinued_[at] = 1;
+            lastStep_[at] = marker.position_rig_mm - last_[at].position_rig_mm;
+        }
+    }
+    for (std::size_t i = 0; i < last_.size(); ++i) {
+        const LastPoint& last = last_[i];
+        if (lastContinued_[i] != 0 || last.age + 1 < kMinContinuedFrames ||
+            last.carried >= config_.stereo.maxCarriedFrames)
+            continue;
+        const Vec3 expected_rig_mm = last.position_rig_mm + neighboursStep(i);
+        // The blob without a partner, in either camera, on whose ray the point is expected.
+        double bestDistance_mm = reach_mm;
+        int bestCamera = -1, bestBlob = -1;
+        Vec3 bestPoint_rig_mm = Vec3::Zero();
+        for (int camera = 0; camera < 2; ++camera)
+            forEachUnpaired(camera, [&](int u, const Vec2&) {
+                Ray ray;
+                Vec2 unused;
+                stereo_.preparedBlob(camera, u, ray, unused);
+                const double along_mm =
+                    (expected_rig_mm - ray.origin_rig_mm).dot(ray.direction_rig);
+                const Vec3 onRay_rig_mm = ray.origin_rig_mm + along_mm * ray.direction_rig;
+                const double distance_mm = (onRay_rig_mm - expected_rig_mm).norm();
+                if (along_mm > 0.0 && distance_mm <= bestDistance_mm) {
+                    bestDistance_mm = distance_mm;
+                    bestCamera = camera;
+                    bestBlob = u;
+                    bestPoint_rig_mm = onRay_rig_mm;
+                }
+            });
+        if (bestCamera < 0 || markers_.size() == markers_.capacity())
+            continue;
+        // Hidden in the other image: a blob of several discs (and, given the image, a lit pixel)
+        // lies where the point projects there. A single disc there is a marker of its own (a
+        // spurious pair of reflections that had lasted 20 frames was carried on the crowd).
+        const std::optional<Vec2> hidden_px =
+            stereo_.rig().camera(1 - bestCamera).project(bestPoint_rig_mm);
+        int cover = -1;
+        if (!hidden_px || !mergedBlobAt(1 - bestCamera, *hidden_px, cover))
+            continue;
+        if (const ImageView& image = images[index(1 - bestCamera)]; image.pixels != nullptr) {
+            const long x = std::lround(hidden_px->x()), y = std::lround(hidden_px->y());
+            if (x < 0 || y < 0 || x >= width_px_ || y >= height_px_ ||
+                image.pixels[y * image.stride_bytes + x] < config_.blobs.threshold)
+                continue;
+        }
+        // A marker of this frame within reach is this one, paired after all (by a step longer
+        // than continuity_mm).
+        bool taken = false;
+        for (const StereoMarker& marker : markers_)
+            taken = taken || (marker.position_rig_mm - bestPoint_rig_mm).norm() <= reach_mm;
+        if (taken)
+            continue;
+        StereoMarker carried;
+        carried.blob0 = bestCamera == 0 ? bestBlob : cover;
+        carried.blob1 = bestCamera == 0 ? cover : bestBlob;
+        carried.position_rig_mm = bestPoint_rig_mm;
+        carried.carried = true;
+        markers_.push_back(carried);
+        markerOfBlob_[index(bestCamera)][static_cast<std::size_t>(bestBlob)] =
+            static_cast<int>(markers_.size() - 1);
+        ++carriedMarkers_;
     }
 }
 
@@ -553,6 +674,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
     c.markerOverflow = stereo_.counters().markerOverflow;
     c.splitAttemptsSkipped = splitAttemptsSkipped_;
     c.pairsForContinuity = pairsForContinuity_;
+    c.carriedMarkers = carriedMarkers_;
     return c;
 }
 

@@ -42,8 +42,14 @@ struct StereoConfig {
     /// wrong one. A point within this distance (mm) of where a point of the last frame was
     /// expected (its last step carried on) continues it; a pair whose point continues nothing
     /// gives way to another pair of its blobs whose point continues a point that had continued
-    /// for ten frames (MarkerPipeline). 0 turns this off (frames that do not follow each other).
+    /// for 20 frames (MarkerPipeline). 0 turns this off (frames that do not follow each other),
+    /// and with it the carrying of markers below.
     double continuity_mm = 3.0;
+    /// A marker that had continued for 20 frames and is now hidden in one image inside another
+    /// marker's blob, while the other camera still sees it apart, is carried on for at most this
+    /// many frames in a row: its point taken on the seeing camera's ray, nearest where it was
+    /// (StereoMarker::carried). 0 turns this off.
+    std::uint32_t maxCarriedFrames = 20;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
 
@@ -61,6 +67,12 @@ struct StereoMarker {
     /// Rectified row of blob0 minus that of blob1 (px): the epipolar error. Its spread over
     /// many markers tells how well the rig still fits the cameras.
     float epipolar_px = 0.0f;
+    /// Seen apart by one camera only and hidden in the other image inside another marker's blob
+    /// (MarkerPipeline carries it on): the point lies on the ray of the seeing camera's blob,
+    /// nearest where the marker was in the frame before. The other camera's blob index is the
+    /// covering blob's (-1 when detection refused that blob); rayGap_mm, reprojection_px and
+    /// epipolar_px are 0.
+    bool carried = false;
 };
 
 /// \brief A correspondence between element \a left of one set and \a right of the other.

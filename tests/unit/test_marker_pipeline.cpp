@@ -290,6 +290,80 @@ TEST(MarkerPipeline, PairsTwoMarkersOnOneLineByTheMarkerThatWasThere) {
     EXPECT_EQ(with.changed, 40U);
 }
 
+/// What runHiddenInCamera0() saw in the ten frames marker A hides: frames in which a point lay
+/// within 0.5 mm of A, points more than 1 mm from both markers, and markers carried.
+struct HiddenRun {
+    int foundA = 0;
+    int ghosts = 0;
+    std::uint64_t carried = 0;
+};
+
+/// 50 frames of the desktop rig in which markers A and B (12 mm apart) move along x at 480 mm.
+/// In frames 30 to 39 camera 0 sees A inside B's disc: one blob for both, given as B's part of a
+/// blob split into discs (\a merged) or as B's own round blob (not merged), bounds and all.
+HiddenRun runHiddenInCamera0(std::uint32_t maxCarriedFrames, bool merged) {
+    const StereoRig rig = test::desktopRig();
+    MarkerPipelineConfig config;
+    config.stereo.maxCarriedFrames = maxCarriedFrames;
+    MarkerPipeline pipeline(rig, config);
+    HiddenRun run;
+    for (int frame = 0; frame < 50; ++frame) {
+        const Vec3 a(40.0 + 0.5 * frame, 10.0, 480.0);
+        const Vec3 b = a + Vec3(0.0, 12.0, 0.0);
+        const bool hidden = frame >= 30 && frame < 40;
+        pipeline.blobs(0).clear();
+        pipeline.blobs(1).clear();
+        for (int camera = 0; camera < 2; ++camera) {
+            Blob ofB = sphereBlob(rig, camera, b);
+            if (camera == 0 && hidden) {
+                // The bounds of both discs together.
+                const Blob ofA = sphereBlob(rig, 0, a);
+                const double r = ofA.discRadius_px() + 1.0;
+                const auto bound = [](double v) { return static_cast<std::uint16_t>(v); };
+                ofB.left = bound(std::min(ofA.centre_px.x(), ofB.centre_px.x()) - r);
+                ofB.right = bound(std::max(ofA.centre_px.x(), ofB.centre_px.x()) + r);
+                ofB.top = bound(std::min(ofA.centre_px.y(), ofB.centre_px.y()) - r);
+                ofB.bottom = bound(std::max(ofA.centre_px.y(), ofB.centre_px.y()) + r);
+                ofB.split = merged;
+            } else {
+                pipeline.blobs(camera).push_back(sphereBlob(rig, camera, a));
+            }
+            pipeline.blobs(camera).push_back(ofB);
+        }
+        pipeline.matchStereo();
+        if (!hidden)
+            continue;
+        bool foundA = false;
+        for (const Vec3& point : pipeline.points_rig_mm()) {
+            foundA = foundA || (point - a).norm() < 0.5;
+            run.ghosts += (point - a).norm() > 1.0 && (point - b).norm() > 1.0 ? 1 : 0;
+        }
+        run.foundA += foundA ? 1 : 0;
+    }
+    run.carried = pipeline.counters().carriedMarkers;
+    return run;
+}
+
+TEST(MarkerPipeline, CarriesAMarkerHiddenInAnothersBlobInOneImage) {
+    const HiddenRun off = runHiddenInCamera0(0, true);
+    EXPECT_EQ(off.foundA, 0); // the scene does hide A from stereo
+    const HiddenRun on = runHiddenInCamera0(20, true);
+    EXPECT_EQ(on.foundA, 10);
+    EXPECT_EQ(on.carried, 10U);
+    EXPECT_EQ(on.ghosts, 0);
+    // Carried for at most maxCarriedFrames in a row.
+    const HiddenRun short_ = runHiddenInCamera0(4, true);
+    EXPECT_EQ(short_.foundA, 4);
+    EXPECT_EQ(short_.carried, 4U);
+}
+
+TEST(MarkerPipeline, DoesNotCarryAMarkerWhereTheOtherImageShowsOneDisc) {
+    // Where A should hide, camera 0 has B's round blob only: nothing says A is in it.
+    const HiddenRun run = runHiddenInCamera0(20, false);
+    EXPECT_EQ(run.foundA, 0);
+    EXPECT_EQ(run.carried, 0U);
+}
+
 TEST(MarkerPipeline, AFrameAllocatesNothing) {
     RenderedFrames frames;
     MarkerPipeline pipeline(frames.world().rig(), MarkerPipelineConfig{});
