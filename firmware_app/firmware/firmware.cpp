@@ -411,13 +411,18 @@ FirmwareState Firmware::restingState() const {
 }
 
 void Firmware::watchEpipolar() {
-    const std::span<const StereoMarker> matched = markers_.markers();
-    if (matched.size() < 3)
-        return;
+    // Carried markers are seen by one camera only: they say nothing of the rig.
     double sum = 0.0;
-    for (const StereoMarker& m : matched)
+    std::size_t matched = 0;
+    for (const StereoMarker& m : markers_.markers()) {
+        if (m.carried)
+            continue;
         sum += static_cast<double>(m.epipolar_px) * static_cast<double>(m.epipolar_px);
-    const double rms = std::sqrt(sum / static_cast<double>(matched.size()));
+        ++matched;
+    }
+    if (matched < 3)
+        return;
+    const double rms = std::sqrt(sum / static_cast<double>(matched));
     // An exponential average over about a hundred frames: a second at the camera rate.
     ++epipolar_.frames;
     epipolar_.rms_px =
@@ -630,6 +635,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
     counters_.stereoPairsRefusedBySize = markers_.stereo().counters().rejectedSize;
     counters_.stereoPairsForContinuity = refused.pairsForContinuity;
+    counters_.markersCarried = refused.carriedMarkers;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -739,6 +745,7 @@ std::string Firmware::statusReport() const {
     row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);
     row("stereo pairs refused: blob sizes fit no one marker", c.stereoPairsRefusedBySize);
     row("stereo pairs changed to continue a marker", c.stereoPairsForContinuity);
+    row("markers carried while hidden in one image", c.markersCarried);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

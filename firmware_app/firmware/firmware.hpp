@@ -89,6 +89,8 @@ struct FirmwareCounters {
     /// Stereo pairs given up for another partner whose point continues a marker of the frame
     /// before.
     std::uint64_t stereoPairsForContinuity = 0;
+    /// Markers carried while hidden in one image inside another marker's blob (marker-frames).
+    std::uint64_t markersCarried = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;
