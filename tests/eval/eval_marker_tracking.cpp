@@ -38,6 +38,8 @@ struct Totals {
     /// markers on one epipolar line), one marker's two images (a centre off), or neither.
     std::uint64_t falseOfTwoMarkers = 0;
     std::uint64_t falseOfOneMarker = 0;
+    /// Of the false markers, those carried while hidden in one image (StereoMarker::carried).
+    std::uint64_t falseCarried = 0;
     std::uint64_t spuriousPointsFound = 0;
     double squaredError = 0.0;
     double maxError = 0.0;
@@ -163,6 +165,8 @@ int main(int argc, char** argv) {
     app.add_option("--continuity", stereoConfig.continuity_mm,
                    "a pair continuing none of the last frame's markers gives way to one that "
                    "continues one within this distance (mm; 0: off)");
+    app.add_option("--carry", stereoConfig.maxCarriedFrames,
+                   "frames in a row a marker hidden in one image is carried on (0: off)");
     FrameToFrameConfig trackConfig;
     app.add_option("--sigma-t", trackConfig.sigma_mm, "sigma_t of eq. 5 (mm)");
     app.add_option("--gate", trackConfig.gate_mm, "frame-to-frame gate (mm)");
@@ -343,6 +347,7 @@ int main(int argc, char** argv) {
                 ++totals.spuriousPointsFound;
             } else if (!real) {
                 ++totals.falseMarkers;
+                totals.falseCarried += pipeline.markers()[k].carried ? 1U : 0U;
                 const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
                 const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
                 if (seen0 >= 0 && seen1 >= 0)
@@ -437,6 +442,10 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(pc.splitAttemptsSkipped));
     std::printf("  stereo pairs changed to continue a marker of the frame before: %llu\n",
                 static_cast<unsigned long long>(pc.pairsForContinuity));
+    std::printf(
+        "  markers carried while hidden in one image: %llu marker-frames, %llu of them false\n",
+        static_cast<unsigned long long>(pc.carriedMarkers),
+        static_cast<unsigned long long>(totals.falseCarried));
     const BlobCounters& bc = pipeline.detector(0).counters();
     std::printf("  blobs (camera 0): accepted %llu, not round %llu (cut discs %llu), small %llu, "
                 "large %llu\n",
