@@ -47,8 +47,8 @@ struct StereoConfig {
     double continuity_mm = 3.0;
     /// A marker that had continued for 20 frames and is now hidden in one image inside another
     /// marker's blob, while the other camera still sees it apart, is carried on for at most this
-    /// many frames in a row: its point taken on the seeing camera's ray, nearest where it was
-    /// (StereoMarker::carried). 0 turns this off.
+    /// many frames in a row: its point taken on the seeing camera's ray, nearest where it is
+    /// expected (StereoMarker::carried). 0 turns this off.
     std::uint32_t maxCarriedFrames = 20;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
@@ -69,7 +69,8 @@ struct StereoMarker {
     float epipolar_px = 0.0f;
     /// Seen apart by one camera only and hidden in the other image inside another marker's blob
     /// (MarkerPipeline carries it on): the point lies on the ray of the seeing camera's blob,
-    /// nearest where the marker was in the frame before. The other camera's blob index is the
+    /// nearest where the marker was in the frame before moved by its neighbours' step since. Its
+    /// depth is that guess, not a measurement. The other camera's blob index is the
     /// covering blob's (-1 when detection refused that blob); rayGap_mm, reprojection_px and
     /// epipolar_px are 0.
     bool carried = false;
