@@ -29,6 +29,7 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , continuing_(config.stereo.maxMarkers)
     , lastContinued_(config.stereo.maxMarkers)
     , lastStep_(config.stereo.maxMarkers)
+    , continuesLast_(config.stereo.maxMarkers)
     , markerOfBlob_{std::make_unique<int[]>(config.blobs.maxBlobs),
                     std::make_unique<int[]>(config.blobs.maxBlobs)} {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
@@ -68,6 +69,8 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
     if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
         images[1].pixels != nullptr)
         splitOnEpipolarLines(images);
+    if (config_.stereo.continuity_mm > 0.0)
+        noteContinuedPoints();
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
         config_.stereo.maxCarriedFrames > 0)
         carryHiddenMarkers(images);
@@ -84,14 +87,29 @@ void MarkerPipeline::rememberForContinuity() {
     current_.clear();
     for (std::size_t m = 0; m < points_rig_mm_.size(); ++m) {
         const Vec3& point = points_rig_mm_[m];
-        std::size_t at = 0;
-        LastPoint next{point, point, 0, 0};
-        if (distanceToLastFrame(point, &at) <= config_.stereo.continuity_mm) {
-            next.age = last_[at].age + 1;
-            next.expected_rig_mm = point + (point - last_[at].position_rig_mm);
-            next.carried = markers_[m].carried ? last_[at].carried + 1 : 0;
+        LastPoint next{point, point, 0, 0, 0};
+        if (const int at = continuesLast_[m]; at >= 0) {
+            const LastPoint& last = last_[static_cast<std::size_t>(at)];
+            next.age = last.age + 1;
+            if (last.missing == 0)
+                next.expected_rig_mm = point + (point - last.position_rig_mm);
+            next.carried = markers_[m].carried ? last.carried + 1 : 0;
         }
         current_.push_back(next);
+    }
+    // A point nothing continues is kept for kMaxMissingFrames, moved as its neighbours move, so
+    // that a marker found again after hiding in both images goes on with its age.
+    for (std::size_t i = 0; i < last_.size(); ++i) {
+        const LastPoint& last = last_[i];
+        if (lastContinued_[i] != 0 || last.missing >= kMaxMissingFrames ||
+            current_.size() == current_.capacity())
+            continue;
+        LastPoint vanished = last;
+        vanished.position_rig_mm += neighboursStep(i);
+        vanished.expected_rig_mm = vanished.position_rig_mm;
+        vanished.carried = 0;
+        ++vanished.missing;
+        current_.push_back(vanished);
     }
     std::sort(current_.begin(), current_.end(), [](const LastPoint& a, const LastPoint& b) {
         return a.expected_rig_mm.x() < b.expected_rig_mm.x();
@@ -298,26 +316,35 @@ Vec3 MarkerPipeline::neighboursStep(std::size_t hidden) const {
     return weights > 0.0 ? Vec3(sum_mm / weights) : Vec3::Zero();
 }
 
-void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) {
-    if (last_.empty())
-        return;
-    const double reach_mm = config_.stereo.continuity_mm;
+void MarkerPipeline::noteContinuedPoints() {
     lastContinued_.clear();
-    for (std::size_t i = 0; i < last_.size(); ++i)
-        lastContinued_.push_back(0);
     lastStep_.clear();
-    for (std::size_t i = 0; i < last_.size(); ++i)
+    for (std::size_t i = 0; i < last_.size(); ++i) {
+        lastContinued_.push_back(0);
         lastStep_.push_back(Vec3::Zero());
+    }
+    continuesLast_.clear();
     for (const StereoMarker& marker : markers_) {
         std::size_t at = 0;
-        if (distanceToLastFrame(marker.position_rig_mm, &at) <= reach_mm) {
+        const bool continues =
+            distanceToLastFrame(marker.position_rig_mm, &at) <= config_.stereo.continuity_mm;
+        continuesLast_.push_back(continues ? static_cast<int>(at) : -1);
+        if (continues) {
             lastContinued_[at] = 1;
             lastStep_[at] = marker.position_rig_mm - last_[at].position_rig_mm;
         }
     }
+}
+
+void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) {
+    const double reach_mm = config_.stereo.continuity_mm;
+    const std::size_t before = markers_.size();
     for (std::size_t i = 0; i < last_.size(); ++i) {
         const LastPoint& last = last_[i];
-        if (lastContinued_[i] != 0 || last.age + 1 < kMinContinuedFrames ||
+        // A point missing from the last frame is not carried: where it is now is a guess from
+        // steps over several frames, and carried on that guess 13 points of touching seed 1 lay
+        // 3-5 mm off (gap of up to 5 frames).
+        if (lastContinued_[i] != 0 || last.missing > 0 || last.age + 1 < kMinContinuedFrames ||
             last.carried >= config_.stereo.maxCarriedFrames)
             continue;
         const Vec3 expected_rig_mm = last.position_rig_mm + neighboursStep(i);
@@ -370,10 +397,14 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
         carried.position_rig_mm = bestPoint_rig_mm;
         carried.carried = true;
         markers_.push_back(carried);
+        continuesLast_.push_back(static_cast<int>(i));
         markerOfBlob_[index(bestCamera)][static_cast<std::size_t>(bestBlob)] =
             static_cast<int>(markers_.size() - 1);
         ++carriedMarkers_;
     }
+    // Marked only now: the neighbours' steps above are those of markers stereo found.
+    for (std::size_t m = before; m < markers_.size(); ++m)
+        lastContinued_[static_cast<std::size_t>(continuesLast_[m])] = 1;
 }
 
 void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {

@@ -151,6 +151,9 @@ private:
     /// in another's disc. Its point is taken on the ray, nearest where it is expected: where it
     /// was, moved by the step its neighbours took (neighboursStep()). StereoMarker::carried.
     void carryHiddenMarkers(const std::array<ImageView, 2>& images);
+    /// After the split pass: which of the last frame's points this frame's markers continue
+    /// (lastContinued_, lastStep_, continuesLast_).
+    void noteContinuedPoints();
     /// The step (mm) from the last frame to this one of the points near last_[\a hidden] that a
     /// marker continues (within kNeighbourhood_mm, the nearer weighing more); zero when none.
     /// Not its own last step carried on: a marker about to hide moves its disc into another's,
@@ -245,15 +248,19 @@ private:
     StereoMatcher stereo_;
     BoundedVector<StereoMarker> markers_;
     BoundedVector<Vec3> points_rig_mm_;
-    /// A point of the last frame (rig frame, mm), for preferContinuingPairs(): where it was,
-    /// where it is expected now (its last step carried on), and for how many frames before it had
-    /// continued a point (within StereoConfig::continuity_mm).
+    /// A point of the last frame (rig frame, mm), or one missing for a few frames
+    /// (kMaxMissingFrames), for preferContinuingPairs() and carryHiddenMarkers(): where it was,
+    /// where it is expected now (its last step carried on; for a missing point, where its
+    /// neighbours' steps moved it), and for how many frames before it had continued a point
+    /// (within StereoConfig::continuity_mm).
     struct LastPoint {
         Vec3 position_rig_mm = Vec3::Zero();
         Vec3 expected_rig_mm = Vec3::Zero();
         std::uint32_t age = 0;
         /// Frames in a row it was carried (carryHiddenMarkers()).
         std::uint32_t carried = 0;
+        /// Frames it has been missing (0: a point of the last frame).
+        std::uint32_t missing = 0;
     };
     /// The last frame's points in order of expected x, and this frame's while it is remembered
     /// (the two swap their storage).
@@ -261,14 +268,22 @@ private:
     BoundedVector<LastPoint> current_;
     /// Per marker of this frame, during preferContinuingPairs(): whether it continues a point.
     BoundedVector<std::uint8_t> continuing_;
-    /// Per point of the last frame, during carryHiddenMarkers(): whether a marker continues it.
+    /// Per point of the last frame, from noteContinuedPoints() on: whether a marker continues it.
     BoundedVector<std::uint8_t> lastContinued_;
     /// Per point of the last frame that a marker continues, its step to this frame (mm).
     BoundedVector<Vec3> lastStep_;
+    /// Per marker of this frame, the point of the last frame it continues (-1: none).
+    BoundedVector<int> continuesLast_;
     /// Points this near (mm) a hidden one share its motion (neighboursStep()): an object's
     /// markers lie within a few centimetres of each other. 100 mm took in other objects' steps
     /// (stress: 7 carried points 3-6 mm off, none with 40).
     static constexpr double kNeighbourhood_mm = 40.0;
+    /// A point nothing continues stays among the last frame's points this many frames
+    /// (LastPoint::missing): a marker hidden in both images for a few frames keeps its age when
+    /// found again, and can be carried when next it hides in one image. Touching seeds 1 / 2,
+    /// found of exact blobs: 97.10 / 97.99% without, 97.47 / 98.19% with 3, 97.49 / 98.24% with 5
+    /// (false markers 31 / 63 -> 32 / 61), 97.57 / 98.26% with 10 (37 / 59).
+    static constexpr std::uint32_t kMaxMissingFrames = 5;
     std::uint64_t carriedMarkers_ = 0;
     /// A pair gives way only to one continuing a point that had continued this many frames (0.2 s
     /// at 100 Hz): a ghost the correspondence made can last a few dozen frames (two markers on
