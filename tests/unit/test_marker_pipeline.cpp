@@ -301,7 +301,8 @@ struct HiddenRun {
 /// 50 frames of the desktop rig in which markers A and B (12 mm apart) move along x at 480 mm.
 /// In frames 30 to 39 camera 0 sees A inside B's disc: one blob for both, given as B's part of a
 /// blob split into discs (\a merged) or as B's own round blob (not merged), bounds and all.
-HiddenRun runHiddenInCamera0(std::uint32_t maxCarriedFrames, bool merged) {
+/// Before that, A is in neither image for the \a goneFrames frames up to frame 28.
+HiddenRun runHiddenInCamera0(std::uint32_t maxCarriedFrames, bool merged, int goneFrames = 0) {
     const StereoRig rig = test::desktopRig();
     MarkerPipelineConfig config;
     config.stereo.maxCarriedFrames = maxCarriedFrames;
@@ -311,11 +312,14 @@ HiddenRun runHiddenInCamera0(std::uint32_t maxCarriedFrames, bool merged) {
         const Vec3 a(40.0 + 0.5 * frame, 10.0, 480.0);
         const Vec3 b = a + Vec3(0.0, 12.0, 0.0);
         const bool hidden = frame >= 30 && frame < 40;
+        const bool gone = frame >= 29 - goneFrames && frame < 29;
         pipeline.blobs(0).clear();
         pipeline.blobs(1).clear();
         for (int camera = 0; camera < 2; ++camera) {
             Blob ofB = sphereBlob(rig, camera, b);
-            if (camera == 0 && hidden) {
+            if (gone) {
+                // A's blob is missing from both images.
+            } else if (camera == 0 && hidden) {
                 // The bounds of both discs together.
                 const Blob ofA = sphereBlob(rig, 0, a);
                 const double r = ofA.discRadius_px() + 1.0;
@@ -355,6 +359,20 @@ TEST(MarkerPipeline, CarriesAMarkerHiddenInAnothersBlobInOneImage) {
     const HiddenRun short_ = runHiddenInCamera0(4, true);
     EXPECT_EQ(short_.foundA, 4);
     EXPECT_EQ(short_.carried, 4U);
+}
+
+TEST(MarkerPipeline, AMarkerGoneFromBothImagesForAFewFramesKeepsItsHistory) {
+    // A is in neither image in frames 26-28: found again in frame 29, one frame before it hides
+    // in camera 0, it goes on with the age it had and is carried.
+    const HiddenRun run = runHiddenInCamera0(20, true, 3);
+    EXPECT_EQ(run.foundA, 10);
+    EXPECT_EQ(run.carried, 10U);
+    EXPECT_EQ(run.ghosts, 0);
+    // Gone for longer than the pipeline remembers (5 frames): found again with no history, and
+    // not carried.
+    const HiddenRun longer = runHiddenInCamera0(20, true, 9);
+    EXPECT_EQ(longer.foundA, 0);
+    EXPECT_EQ(longer.carried, 0U);
 }
 
 TEST(MarkerPipeline, DoesNotCarryAMarkerWhereTheOtherImageShowsOneDisc) {
