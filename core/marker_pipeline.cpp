@@ -402,9 +402,13 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
             static_cast<int>(markers_.size() - 1);
         ++carriedMarkers_;
     }
-    // Marked only now: the neighbours' steps above are those of markers stereo found.
-    for (std::size_t m = before; m < markers_.size(); ++m)
-        lastContinued_[static_cast<std::size_t>(continuesLast_[m])] = 1;
+    // Marked only now: the neighbours' steps above are those of markers stereo found. From here
+    // on (the missing points moved in rememberForContinuity()) a carried point steps too.
+    for (std::size_t m = before; m < markers_.size(); ++m) {
+        const auto at = static_cast<std::size_t>(continuesLast_[m]);
+        lastContinued_[at] = 1;
+        lastStep_[at] = markers_[m].position_rig_mm - last_[at].position_rig_mm;
+    }
 }
 
 void MarkerPipeline::splitOnEpipolarLines(const std::array<ImageView, 2>& images) {
