@@ -23,12 +23,6 @@ constexpr std::size_t kConsensusCandidates = 32;
 /// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
 /// four markers of one random layout already land on four of another by chance.
 constexpr double kRegistrationTolerance_mm = 0.5;
-/// A triangle shared by two pieces ties them only when no other pair of their triangles comes
-/// within this many registration tolerances on every side.
-constexpr double kTriangleUniqueness = 4.0;
-/// Side comparisons a search for a shared triangle makes at most (two pieces of 30 markers each
-/// have 4,060 triangles; a likeness among them is then nearly certain and the search stops).
-constexpr std::size_t kTriangleComparisons = 2000000;
 /// A piece leaving and another coming into view within this many frames is a handover whose
 /// motion two pieces tied by a triangle must explain.
 constexpr std::size_t kSmoothGap_frames = 10;
@@ -76,9 +70,7 @@ std::optional<RigidTransform> placeOnGlimpses(std::span<const Vec3> part, const 
         return std::nullopt;
     std::optional<RigidTransform> placed;
     if (triangle) {
-        placed = soleSharedTriangle(part, seen.places_mm, kRegistrationTolerance_mm,
-                                    kTriangleUniqueness * kRegistrationTolerance_mm,
-                                    kTriangleComparisons);
+        placed = soleSharedTriangle(part, seen.places_mm, kTriangleTie);
     } else {
         const Registration r =
             registerLayout(part, seen.places_mm, sideTolerance_mm, kRegistrationTolerance_mm);
@@ -262,9 +254,7 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 // them: the triangle is their only tie, taken only when no other triangle of
                 // either is like it.
                 auto sharedTriangle = [&]() -> std::optional<RigidTransform> {
-                    return soleSharedTriangle(
-                        from.refined_mm, into.refined_mm, kRegistrationTolerance_mm,
-                        kTriangleUniqueness * kRegistrationTolerance_mm, kTriangleComparisons);
+                    return soleSharedTriangle(from.refined_mm, into.refined_mm, kTriangleTie);
                 };
                 if ((T_into_from_from = lone.T_into_from_from))
                     ++counters_.joinedByMotion;

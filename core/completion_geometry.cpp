@@ -186,8 +186,8 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
 }
 
 std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
-                                                 std::span<const Vec3> whole, double tolerance_mm,
-                                                 double uniqueness_mm, std::size_t budget) {
+                                                 std::span<const Vec3> whole,
+                                                 const TriangleTieLimits& limits) {
     if (part.size() < 3 || whole.size() < 3)
         return std::nullopt;
     std::vector<SortedTriangle> ofPart, ofWhole;
@@ -200,12 +200,12 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
     std::size_t compared = 0;
     for (const SortedTriangle& t : ofPart) {
         auto it =
-            std::lower_bound(ofWhole.begin(), ofWhole.end(), longest(t) - uniqueness_mm,
+            std::lower_bound(ofWhole.begin(), ofWhole.end(), longest(t) - limits.uniqueness_mm,
                              [&](const SortedTriangle& w, double v) { return longest(w) < v; });
-        for (; it != ofWhole.end() && longest(*it) <= longest(t) + uniqueness_mm; ++it) {
-            if (++compared > budget)
+        for (; it != ofWhole.end() && longest(*it) <= longest(t) + limits.uniqueness_mm; ++it) {
+            if (++compared > limits.budget)
                 return std::nullopt;
-            if (!congruent(t, *it, uniqueness_mm))
+            if (!congruent(t, *it, limits.uniqueness_mm))
                 continue;
             if (soleOfPart != nullptr)
                 return std::nullopt; // a second likeness: the shared triangle is no identity
@@ -213,8 +213,8 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
             soleOfWhole = &*it;
         }
     }
-    if (soleOfPart == nullptr || !congruent(*soleOfPart, *soleOfWhole, tolerance_mm) ||
-        !wellShaped(*soleOfPart, tolerance_mm))
+    if (soleOfPart == nullptr || !congruent(*soleOfPart, *soleOfWhole, limits.tolerance_mm) ||
+        !wellShaped(*soleOfPart, limits.tolerance_mm))
         return std::nullopt;
     std::array<Vec3, 3> from, to;
     for (std::size_t c = 0; c < 3; ++c) {
@@ -223,6 +223,14 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
     }
     const std::optional<RigidFit> fit = fitRigid(from, to);
     if (!fit)
+        return std::nullopt;
+    const Vec3 centre_mm = (from[0] + from[1] + from[2]) / 3.0;
+    double reach_mm = 0.0;
+    for (const Vec3& m : part)
+        reach_mm = std::max(reach_mm, (m - centre_mm).norm());
+    const double leverError_mm =
+        reach_mm * std::max(fit->rms_mm, limits.precision_mm) / triangleHeight(*soleOfPart);
+    if (!(leverError_mm <= limits.placement_mm))
         return std::nullopt;
     return fit->transform;
 }
@@ -282,13 +290,17 @@ bool congruent(const SortedTriangle& a, const SortedTriangle& b, double toleranc
     return true;
 }
 
-bool wellShaped(const SortedTriangle& t, double tolerance_mm) {
+double triangleHeight(const SortedTriangle& t) {
     const auto& s = t.sides_mm;
     const double half = 0.5 * (s[0] + s[1] + s[2]);
     const double areaSquared = half * (half - s[0]) * (half - s[1]) * (half - s[2]); // Heron
-    const double height = areaSquared > 0.0 ? 2.0 * std::sqrt(areaSquared) / s[2] : 0.0;
+    return areaSquared > 0.0 ? 2.0 * std::sqrt(areaSquared) / s[2] : 0.0;
+}
+
+bool wellShaped(const SortedTriangle& t, double tolerance_mm) {
+    const auto& s = t.sides_mm;
     return s[1] - s[0] > 2.0 * tolerance_mm && s[2] - s[1] > 2.0 * tolerance_mm &&
-           height > 4.0 * tolerance_mm;
+           triangleHeight(t) > 4.0 * tolerance_mm;
 }
 
 RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,

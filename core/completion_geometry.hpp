@@ -68,20 +68,53 @@ struct Registration {
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
                             double tolerance_mm, double matchTolerance_mm);
 
+/// What a tie of two layouts by one shared triangle must satisfy (soleSharedTriangle).
+struct TriangleTieLimits {
+    /// The shared triangle's sides agree within this (mm).
+    double tolerance_mm;
+    /// No other pair of triangles of the two layouts has every side within this (mm).
+    double uniqueness_mm;
+    /// How exactly the two layouts are known (mm): a floor under the triangle fit's RMS.
+    double precision_mm;
+    /// The triangle's error, carried over its lever arm, moves the placed layout's farthest
+    /// marker by at most this (mm).
+    double placement_mm;
+    /// Side comparisons at most: large layouts have chance likenesses anyway.
+    std::size_t budget;
+};
+
+/// The limits completion's joins use. A triangle that is the only tie of two pieces must agree
+/// as closely as their layouts are known: the joint least squares measures them to 0.01-0.05 mm,
+/// and a triangle shared by two pieces of one body matches within 0.03 mm. At 0.5 mm (a layout
+/// registration's tolerance), with its uniqueness judged at 2 mm, a plate's or a star's hundreds
+/// of triangles nearly always held a second likeness and the true tie was refused, while chance
+/// likenesses of two objects matched at 0.14-0.75 mm. It is unique when no other pair of
+/// triangles comes within four times the tolerance on every side, and it must place the far
+/// markers of the piece it places within a registration's 0.5 mm. Side comparisons stop at two
+/// million (two pieces of 30 markers each have 4,060 triangles).
+inline constexpr TriangleTieLimits kTriangleTie{.tolerance_mm = 0.1,
+                                                .uniqueness_mm = 0.4,
+                                                .precision_mm = 0.05,
+                                                .placement_mm = 0.5,
+                                                .budget = 2000000};
+
 /**
  * \brief The placement of \a part in \a whole by the one triangle the two layouts share.
  *
  * Two pieces of one body that are never in view together beyond three shared markers are tied by
  * those three alone. A triangle is no identity when another is like it, so this asks that exactly
- * one triangle of \a part has sides within \a uniqueness_mm of one of \a whole (every triangle of
- * both counted, flat or not), that the two agree within \a tolerance_mm, and that the triangle's
- * corners are told apart by its sides and it is not flat (wellShaped at \a tolerance_mm). Gives up
- * (nothing) after \a budget side comparisons: large layouts have chance likenesses anyway.
- * Independent of the order of either layout's markers.
+ * one triangle of \a part has sides within TriangleTieLimits::uniqueness_mm of one of \a whole
+ * (every triangle of both counted, flat or not), that the two agree within
+ * TriangleTieLimits::tolerance_mm, that the triangle's corners are told apart by its sides and it
+ * is not flat (wellShaped at that tolerance), and that it is wide enough for the part's farthest
+ * marker: the fit's RMS (at least TriangleTieLimits::precision_mm) turns the placement by about
+ * that over the triangle's height, which moves a marker at distance r by r times as much. Gives
+ * up (nothing) after TriangleTieLimits::budget side comparisons. Independent of the order of
+ * either layout's markers.
  */
 std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
-                                                 std::span<const Vec3> whole, double tolerance_mm,
-                                                 double uniqueness_mm, std::size_t budget);
+                                                 std::span<const Vec3> whole,
+                                                 const TriangleTieLimits& limits);
 
 /// A marker that moved less than this (mm) since a body was tracked alone, or since its S_min
 /// pairs were found, leaves them standing: the tracker matches within 1.5 mm, S_min counts markers
@@ -124,6 +157,9 @@ bool nearAny(std::span<const Vec3> points, const Vec3& p, double radius2_mm2);
 
 /// Whether every side of \a a is within \a tolerance_mm of the same side of \a b.
 bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm);
+
+/// Its height over its longest side (mm).
+double triangleHeight(const SortedTriangle& t);
 
 /// Whether its corners can be told apart by its sides at \a tolerance_mm, and it is tall enough
 /// over its longest side to fix a turn about it.

@@ -108,34 +108,59 @@ TEST(LayoutRegistration, SaysWhenASelfSimilarLayoutTakesAPieceInSeveralPlaces) {
 }
 
 // Two pieces that share exactly three markers: the shared triangle places one on the other,
-// whatever the order of either's markers; a second triangle like it in the whole makes the
-// likeness no identity.
+// whatever the order of either's markers. A triangle like it within a millimetre elsewhere in the
+// whole leaves it the identity (layouts are known to hundredths of a millimetre); a second copy
+// of it makes the likeness no identity, and so does a marker of the piece so far from the triangle
+// that the triangle cannot place it within half a millimetre.
 TEST(LayoutRegistration, PlacesAPieceByTheOneTriangleItSharesUnlessAnotherIsLikeIt) {
     const std::vector<Vec3> whole = test::irregularLayout(8, 31, 15.0);
     RigidTransform moved;
     moved.rotation = Quat(Eigen::AngleAxisd(1.1, Vec3(0.6, -0.2, 1.0).normalized()));
     moved.translation_mm = Vec3(-40.0, 8.0, 300.0);
-    // The piece: three markers of the whole and three of its own, far from the whole's.
+    // The piece: three markers of the whole and three of its own, away from the whole's.
     const std::array<std::size_t, 3> shared{6, 1, 4};
-    std::vector<Vec3> piece{moved.apply(Vec3(0.0, 0.0, 150.0)),
-                            moved.apply(Vec3(35.0, 0.0, 170.0))};
+    std::vector<Vec3> piece{moved.apply(Vec3(0.0, 0.0, 60.0)), moved.apply(Vec3(35.0, 0.0, 70.0))};
     for (const std::size_t m : shared)
         piece.push_back(moved.apply(whole[m]));
-    piece.push_back(moved.apply(Vec3(10.0, 40.0, 190.0)));
+    piece.push_back(moved.apply(Vec3(10.0, 40.0, 80.0)));
     const std::optional<RigidTransform> placed =
-        completion_detail::soleSharedTriangle(piece, whole, 0.5, 2.0, 1000000);
+        completion_detail::soleSharedTriangle(piece, whole, completion_detail::kTriangleTie);
     ASSERT_TRUE(placed.has_value());
     for (std::size_t i = 0; i < shared.size(); ++i)
         EXPECT_LT((placed->apply(piece[2 + i]) - whole[shared[i]]).norm(), 1e-6);
 
-    // The same three markers once more, elsewhere in the whole: two places fit.
-    std::vector<Vec3> twice = whole;
+    // The same three markers once more elsewhere in the whole, each 0.8 mm off: a near likeness
+    // that a tolerance of a registration (0.5 mm, uniqueness at 2 mm) would count as a rival.
     RigidTransform elsewhere;
     elsewhere.rotation = Quat(Eigen::AngleAxisd(2.0, Vec3::UnitZ()));
     elsewhere.translation_mm = Vec3(0.0, 0.0, 400.0);
+    const std::array<Vec3, 3> nudge{Vec3(0.8, 0.0, 0.0), Vec3(0.0, -0.8, 0.0), Vec3(0.0, 0.0, 0.8)};
+    std::vector<Vec3> nearLikeness = whole;
+    for (std::size_t i = 0; i < shared.size(); ++i)
+        nearLikeness.push_back(elsewhere.apply(whole[shared[i]] + nudge[i]));
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(piece, nearLikeness,
+                                                      completion_detail::kTriangleTie));
+    EXPECT_FALSE(completion_detail::soleSharedTriangle(
+        piece, nearLikeness,
+        completion_detail::TriangleTieLimits{.tolerance_mm = 0.5,
+                                             .uniqueness_mm = 2.0,
+                                             .precision_mm = 0.05,
+                                             .placement_mm = 0.5,
+                                             .budget = 1000000}));
+
+    // An exact copy: two places fit.
+    std::vector<Vec3> twice = whole;
     for (const std::size_t m : shared)
         twice.push_back(elsewhere.apply(whole[m]));
-    EXPECT_FALSE(completion_detail::soleSharedTriangle(piece, twice, 0.5, 2.0, 1000000));
+    EXPECT_FALSE(
+        completion_detail::soleSharedTriangle(piece, twice, completion_detail::kTriangleTie));
+
+    // A marker of the piece 2 m from the triangle: a turn of 0.05 mm over the triangle's height
+    // moves it by more than half a millimetre.
+    std::vector<Vec3> reaching = piece;
+    reaching.push_back(moved.apply(Vec3(0.0, 0.0, 2000.0)));
+    EXPECT_FALSE(
+        completion_detail::soleSharedTriangle(reaching, whole, completion_detail::kTriangleTie));
 }
 
 TEST(SessionBuffer, KeepsEachFrameInOneOrderAndRefusesWhatDoesNotFit) {
@@ -329,8 +354,8 @@ TEST(CalibrationCompletion, JoinsAPieceTiedByTwoSharedMarkersAndAGlimpse) {
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     // The condition of the scene: the triangle of markers 5, 6 and 7 is like no other.
-    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 5, 4), subset(body, 0, 8), 0.5,
-                                                      2.0, 1000000));
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 5, 4), subset(body, 0, 8),
+                                                      completion_detail::kTriangleTie));
     const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 5, 4)});
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, seeds, out), 1U);
@@ -351,8 +376,8 @@ TEST(CalibrationCompletion, JoinsTwoPiecesThatShareOnlyATriangleSeenFarApartInTi
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     // The condition of the scene: the shared triangle (markers 4, 5, 6) is the pieces' only tie.
-    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 4, 6), subset(body, 0, 7), 0.5,
-                                                      2.0, 1000000));
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(subset(body, 4, 6), subset(body, 0, 7),
+                                                      completion_detail::kTriangleTie));
     const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 4, 6)});
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, seeds, out), 1U);
@@ -389,8 +414,8 @@ TEST(CalibrationCompletion, JoinsTwoPiecesWhoseSharedMarkersAreFollowedFromOneTo
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     // The condition of the scene: the shared triangle ties nothing by its shape.
-    ASSERT_FALSE(completion_detail::soleSharedTriangle(subset(body, 4, 6), subset(body, 0, 7), 0.5,
-                                                       2.0, 1000000));
+    ASSERT_FALSE(completion_detail::soleSharedTriangle(subset(body, 4, 6), subset(body, 0, 7),
+                                                       completion_detail::kTriangleTie));
     const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 4, 6)});
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, seeds, out), 1U);
@@ -419,7 +444,7 @@ TEST(CalibrationCompletion, KeepsTwoObjectsWithALikeTriangleApart) {
     const CompletionConfig config;
     CalibrationCompletion completion(config);
     // The condition of the scene: without the motion, the likeness would tie them.
-    ASSERT_TRUE(completion_detail::soleSharedTriangle(b, a, 0.5, 2.0, 1000000));
+    ASSERT_TRUE(completion_detail::soleSharedTriangle(b, a, completion_detail::kTriangleTie));
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, modelsOf({a, b}), out), 2U);
     EXPECT_EQ(completion.counters().joinedByLayout, 0U);
