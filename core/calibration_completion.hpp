@@ -259,11 +259,13 @@ private:
     /// A body to pose from triangles, and what poseFromTriangles() gathers for it.
     struct TriangleJob;
     void poseFromTriangles(const SessionBuffer& session, std::vector<TriangleJob>& jobs);
-    /// Frame \a f's pose of \a job's body from the frame's points \a free and their triangles
-    /// \a seenTriangles, if one pose is best.
+    /// Frame \a f's pose of each of \a jobs' bodies not posed there, from the frame's points
+    /// \a free and their triangles \a seenTriangles, where one pose is best. \a owned holds
+    /// every job's own triangles, by longest side, with SortedTriangle::body naming the job.
     void poseFromTriangles(std::span<const Vec3> free,
                            std::span<const completion_detail::SortedTriangle> seenTriangles,
-                           TriangleJob& job, std::size_t f) const;
+                           std::span<const completion_detail::SortedTriangle> owned,
+                           std::span<TriangleJob> jobs, std::size_t f) const;
     /// The poses from triangles that lie in runs of poses following on from each other, into
     /// \a job's body.
     void keepTriangleRuns(TriangleJob& job);

@@ -100,6 +100,16 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
         job.seed.resize(frames);
     }
 
+    // Every job's own triangles in one list by longest side (each job's in its own order), so
+    // that a frame's triangle is looked up once for all of them.
+    std::vector<SortedTriangle> owned;
+    for (std::size_t j = 0; j < jobs.size(); ++j)
+        for (SortedTriangle t : jobs[j].own) {
+            t.body = j;
+            owned.push_back(t);
+        }
+    std::stable_sort(owned.begin(), owned.end(), shorterLongestSide);
+
     // Points another body's pose explains are looked at too: where two pieces of one object
     // share markers, the tracker gives the shared points to one of them only, and the other piece
     // would never be seen posed with it. So a frame's triangles of points are the same for every
@@ -126,9 +136,7 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
                         seenTriangles.push_back(seen);
                 }
             }
-        for (TriangleJob& job : jobs)
-            if (!job.body->posed[f])
-                poseFromTriangles(free, seenTriangles, job, f);
+        poseFromTriangles(free, seenTriangles, owned, jobs, f);
     }
 
     for (TriangleJob& job : jobs)
@@ -137,59 +145,64 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
 
 void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
                                               std::span<const SortedTriangle> seenTriangles,
-                                              TriangleJob& job, std::size_t f) const {
-    const Body& body = *job.body;
+                                              std::span<const SortedTriangle> owned,
+                                              std::span<TriangleJob> jobs, std::size_t f) const {
     const double tol = config_.triangleTolerance_mm;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
     constexpr double kDegree = std::numbers::pi / 180.0;
     const double sameView = std::cos(config_.triangleViewAngle_deg * kDegree);
-    auto seenFromHere = [&](const RigidTransform& T_rig_from_body, std::uint32_t m) {
+    auto seenFromHere = [&](const TriangleJob& job, const RigidTransform& T_rig_from_body,
+                            std::uint32_t m) {
+        const Vec3& marker = job.body->markers_mm[m];
         const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
-        return seenFromNear(job.seenFrom[m], (viewpoint - body.markers_mm[m]).normalized(),
-                            sameView);
+        return seenFromNear(job.seenFrom[m], (viewpoint - marker).normalized(), sameView);
     };
-    // Every triple of points that stands for one triangle of the body: the pose that puts the
+    // Every triple of points that stands for one triangle of a body: the pose that puts the
     // most markers on points wins; two different poses that do equally well, none.
-    std::size_t bestSupport = 0;
-    bool tie = false;
-    std::optional<RigidTransform> best;
-    const std::span<const SortedTriangle> own = job.own;
+    struct Choice {
+        std::size_t support = 0;
+        bool tie = false;
+        std::optional<RigidTransform> best;
+    };
+    std::vector<Choice> choices(jobs.size());
     for (const SortedTriangle& seen : seenTriangles) {
-        if (seen.sides_mm[2] > job.longest)
-            continue;
         auto it =
-            std::lower_bound(own.begin(), own.end(), seen.sides_mm[2] - tol,
+            std::lower_bound(owned.begin(), owned.end(), seen.sides_mm[2] - tol,
                              [](const SortedTriangle& t, double s) { return t.sides_mm[2] < s; });
-        for (; it != own.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
-            if (!congruent(*it, seen, tol))
+        for (; it != owned.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
+            TriangleJob& job = jobs[it->body];
+            const Body& body = *job.body;
+            if (body.posed[f] || !congruent(*it, seen, tol))
                 continue;
             const std::array<Vec3, 3> from = {body.markers_mm[it->corners[0]],
                                               body.markers_mm[it->corners[1]],
                                               body.markers_mm[it->corners[2]]};
             const std::array<Vec3, 3> to = {free[seen.corners[0]], free[seen.corners[1]],
                                             free[seen.corners[2]]};
-            const std::optional<RigidFit> fit = fitRigid(from, to);
-            if (!fit || !seenFromHere(fit->transform, it->corners[0]) ||
-                !seenFromHere(fit->transform, it->corners[1]) ||
-                !seenFromHere(fit->transform, it->corners[2]))
+            const std::optional<RigidTransform> fit = fitTriangle(from, to);
+            if (!fit || !seenFromHere(job, *fit, it->corners[0]) ||
+                !seenFromHere(job, *fit, it->corners[1]) ||
+                !seenFromHere(job, *fit, it->corners[2]))
                 continue;
             std::size_t support = 0;
             for (const Vec3& m : body.markers_mm)
-                support += nearestPoint(free, fit->transform.apply(m), radius) != nullptr;
-            if (support > bestSupport) {
-                bestSupport = support;
-                best = fit->transform;
-                tie = false;
-            } else if (support == bestSupport && best &&
-                       disagreement_mm(*best, fit->transform, job.ball) > radius) {
-                tie = true;
+                support += nearestPoint(free, fit->apply(m), radius) != nullptr;
+            Choice& choice = choices[it->body];
+            if (support > choice.support) {
+                choice.support = support;
+                choice.best = *fit;
+                choice.tie = false;
+            } else if (support == choice.support && choice.best &&
+                       disagreement_mm(*choice.best, *fit, job.ball) > radius) {
+                choice.tie = true;
             }
         }
     }
-    if (best && !tie) {
-        job.seeded[f] = 1;
-        job.seed[f] = *best;
-    }
+    for (std::size_t j = 0; j < jobs.size(); ++j)
+        if (choices[j].best && !choices[j].tie) {
+            jobs[j].seeded[f] = 1;
+            jobs[j].seed[f] = *choices[j].best;
+        }
 }
 
 void CalibrationCompletion::keepTriangleRuns(TriangleJob& job) {
