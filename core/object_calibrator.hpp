@@ -403,6 +403,12 @@ private:
         std::size_t j = 0;
     };
     BoundedVector<MemberPair> memberPairs_;
+    /// The same pairs by first member, each member's by distance (pairs of member i start at
+    /// pairsOfMemberStart_[i]): where a layout search finds the third corner of a triangle.
+    BoundedVector<MemberPair> pairsByMember_;
+    BoundedVector<std::size_t> pairsOfMemberStart_;
+    /// Scratch of a layout search: the members that can be a triangle's third corner.
+    BoundedVector<std::size_t> thirdCorners_;
     /// Scratch of layout searches: the points searched for (mm), and a small piece's layout.
     BoundedVector<Vec3> searchPoints_;
     BoundedVector<Vec3> piecePoints_;

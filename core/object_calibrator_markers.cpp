@@ -138,32 +138,68 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
     std::sort(
         memberPairs_.begin(), memberPairs_.end(),
         [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
+    // The same pairs grouped by first member (a counting sort, so each member's stay by
+    // distance): a triangle's third corner is then looked up by its distance from the first,
+    // not sought among all members.
+    pairsOfMemberStart_.clear();
+    pairsOfMemberStart_.resize(n + 1);
+    std::fill(pairsOfMemberStart_.begin(), pairsOfMemberStart_.end(), std::size_t{0});
+    for (const MemberPair& pair : memberPairs_)
+        ++pairsOfMemberStart_[pair.i + 1];
+    for (std::size_t i = 0; i < n; ++i)
+        pairsOfMemberStart_[i + 1] += pairsOfMemberStart_[i];
+    pairsByMember_.clear();
+    pairsByMember_.resize(memberPairs_.size());
+    for (const MemberPair& pair : memberPairs_)
+        pairsByMember_[pairsOfMemberStart_[pair.i]++] = pair;
+    for (std::size_t i = n; i > 0; --i)
+        pairsOfMemberStart_[i] = pairsOfMemberStart_[i - 1];
+    pairsOfMemberStart_[0] = 0;
     const double tol = config_.smin.tolerance_mm;
+    const auto byDistance = [](const MemberPair& p, double d) { return p.distance_mm < d; };
     const std::size_t c = points.size();
     std::size_t budget = kRefindBudget;
     std::optional<RigidTransform> best;
     std::size_t bestCount = minPoints - 1;
-    for (std::size_t a = 0; a < c && budget > 0; ++a)
-        for (std::size_t b = a + 1; b < c && budget > 0; ++b) {
+    // Every point on a member: no later triangle can place more, and the search is done.
+    auto searching = [&] { return budget > 0 && bestCount < c; };
+    for (std::size_t a = 0; a < c && searching(); ++a)
+        for (std::size_t b = a + 1; b < c && searching(); ++b) {
             const double dab = (points[a] - points[b]).norm();
             const auto* first =
-                std::lower_bound(memberPairs_.begin(), memberPairs_.end(), dab - tol,
-                                 [](const MemberPair& p, double d) { return p.distance_mm < d; });
+                std::lower_bound(memberPairs_.begin(), memberPairs_.end(), dab - tol, byDistance);
             for (const auto* pair = first;
-                 pair != memberPairs_.end() && pair->distance_mm <= dab + tol && budget > 0;
+                 pair != memberPairs_.end() && pair->distance_mm <= dab + tol && searching();
                  ++pair) {
                 const Vec3& mi = o.members[pair->i].model_mm;
                 const Vec3& mj = o.members[pair->j].model_mm;
-                for (std::size_t cc = b + 1; cc < c && budget > 0; ++cc) {
+                for (std::size_t cc = b + 1; cc < c && searching(); ++cc) {
+                    --budget;
                     const double dac = (points[a] - points[cc]).norm();
                     const double dbc = (points[b] - points[cc]).norm();
-                    for (std::size_t l = 0; l < n && budget > 0; ++l) {
+                    // Members dac from mi (its pairs by distance), and dbc from mj; tried in the
+                    // order of their index, as a scan of all members would.
+                    thirdCorners_.clear();
+                    const MemberPair* fromI = pairsByMember_.begin() + pairsOfMemberStart_[pair->i];
+                    const MemberPair* endI =
+                        pairsByMember_.begin() + pairsOfMemberStart_[pair->i + 1];
+                    for (const MemberPair* third =
+                             std::lower_bound(fromI, endI, dac - tol, byDistance);
+                         third != endI && third->distance_mm <= dac + tol && budget > 0; ++third) {
                         --budget;
+                        if (third->j != pair->j &&
+                            std::abs((mj - o.members[third->j].model_mm).norm() - dbc) <= tol)
+                            thirdCorners_.push_back(third->j);
+                    }
+                    std::sort(thirdCorners_.begin(), thirdCorners_.end());
+                    for (const std::size_t l : thirdCorners_) {
+                        // A try counts the points on members: as many steps as points.
+                        if (budget < c) {
+                            budget = 0;
+                            break;
+                        }
+                        budget -= c;
                         const Member& ml = o.members[l];
-                        if (l == pair->i || l == pair->j || !searched(ml) ||
-                            std::abs((mi - ml.model_mm).norm() - dac) > tol ||
-                            std::abs((mj - ml.model_mm).norm() - dbc) > tol)
-                            continue;
                         const Vec3 from[3] = {mi, mj, ml.model_mm};
                         const Vec3 to[3] = {points[a], points[b], points[cc]};
                         const std::optional<RigidFit> fit = fitRigid(from, to);

@@ -254,6 +254,38 @@ TEST_F(TwoBodies, ABodyTakenOutAndBroughtBackIsFoundAgain) {
     EXPECT_GT(calibrator.counters().refound + calibrator.counters().merged, 0u);
 }
 
+// A body of 60 markers taken out of view for two seconds and brought back: the search for its
+// layout among the points finishes within its step budget and finds it. (Scanning every member
+// for each triangle's third corner, as the search first did, ran out of steps here.)
+TEST(ObjectCalibrator, ALargeBodyBroughtBackIsFoundWithinTheSearchBudget) {
+    const std::vector<Vec3> layout = irregularLayout(60, 5);
+    CalibrationConfig config;
+    ObjectCalibrator calibrator(config);
+    std::mt19937 random{7};
+    std::normal_distribution<double> noise{0.0, 0.05};
+    std::vector<Vec3> points;
+    for (int f = 0; f < 2000; ++f) {
+        const double t_s = f / 100.0;
+        points.clear();
+        if (f < 900 || f >= 1100) {
+            const RigidTransform pose =
+                poseAt(t_s, Vec3(0.0, 0.0, 600.0), Vec3(0.3, 1.0, 0.2), 0.5, 0.0);
+            for (const Vec3& m : layout)
+                points.push_back(pose.apply(m));
+            addNoise(points, random, noise);
+        }
+        calibrator.update(t_s, points);
+    }
+    EXPECT_EQ(calibrator.counters().refindBudgetExhausted, 0u);
+    EXPECT_GT(calibrator.counters().refound + calibrator.counters().merged, 0u);
+    std::vector<MarkerModel> models;
+    for (int i = 0; i < 4; ++i)
+        models.emplace_back(config.maxMarkersPerObject);
+    models.resize(calibrator.exportLayouts(models)); // S_min of 60 markers takes seconds
+    ASSERT_EQ(models.size(), 1u);
+    EXPECT_TRUE(sameShape(models[0].markers_model_mm.span(), layout, 0.2));
+}
+
 TEST_F(TwoBodies, IdenticalBodiesSeenApartStayTwoWhenOneLeaves) {
     // Two bodies with one layout, seen side by side; then one leaves for good. The lost one fits
     // the other's layout exactly, but having been seen apart they are two objects, not one body
