@@ -33,6 +33,8 @@ ObjectCalibrator::ObjectCalibrator(const CalibrationConfig& config)
     , pairsByMember_(stride_ * stride_)
     , pairsOfMemberStart_(stride_ + 1)
     , thirdCorners_(stride_)
+    , searchedMembers_(stride_)
+    , placedMembers_(stride_)
     , searchPoints_(config.maxMarkers)
     , piecePoints_(stride_)
     , seenApart_(

@@ -407,8 +407,11 @@ private:
     /// pairsOfMemberStart_[i]): where a layout search finds the third corner of a triangle.
     BoundedVector<MemberPair> pairsByMember_;
     BoundedVector<std::size_t> pairsOfMemberStart_;
-    /// Scratch of a layout search: the members that can be a triangle's third corner.
+    /// Scratch of a layout search: the members that can be a triangle's third corner, and the
+    /// searched members' places (object frame) and where a try puts them (the points' frame).
     BoundedVector<std::size_t> thirdCorners_;
+    BoundedVector<Vec3> searchedMembers_;
+    BoundedVector<Vec3> placedMembers_;
     /// Scratch of layout searches: the points searched for (mm), and a small piece's layout.
     BoundedVector<Vec3> searchPoints_;
     BoundedVector<Vec3> piecePoints_;

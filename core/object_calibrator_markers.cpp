@@ -155,6 +155,11 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
     for (std::size_t i = n; i > 0; --i)
         pairsOfMemberStart_[i] = pairsOfMemberStart_[i - 1];
     pairsOfMemberStart_[0] = 0;
+    searchedMembers_.clear();
+    for (const Member& m : o.members)
+        if (searched(m))
+            searchedMembers_.push_back(m.model_mm);
+    const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     const double tol = config_.smin.tolerance_mm;
     const auto byDistance = [](const MemberPair& p, double d) { return p.distance_mm < d; };
     const std::size_t c = points.size();
@@ -205,10 +210,18 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
                         const std::optional<RigidFit> fit = fitRigid(from, to);
                         if (!fit)
                             continue;
+                        // The points on a member (as memberNear() finds them, with each
+                        // member placed once), given up once they can no longer beat the best.
+                        placedMembers_.clear();
+                        for (const Vec3& m : searchedMembers_)
+                            placedMembers_.push_back(fit->transform.apply(m));
                         std::size_t count = 0;
-                        for (std::size_t k = 0; k < c; ++k)
-                            if (memberNear(o, fit->transform, points[k], which) != kNone)
-                                ++count;
+                        for (std::size_t k = 0; k < c && count + (c - k) > bestCount; ++k)
+                            count += std::any_of(placedMembers_.begin(), placedMembers_.end(),
+                                                 [&](const Vec3& placed) {
+                                                     return (placed - points[k]).squaredNorm() <=
+                                                            radius2;
+                                                 });
                         if (count > bestCount) {
                             bestCount = count;
                             best = fit->transform;
