@@ -205,16 +205,15 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
                         }
                         budget -= c;
                         const Member& ml = o.members[l];
-                        const Vec3 from[3] = {mi, mj, ml.model_mm};
-                        const Vec3 to[3] = {points[a], points[b], points[cc]};
-                        const std::optional<RigidFit> fit = fitRigid(from, to);
+                        const std::optional<RigidTransform> fit =
+                            fitTriangle({mi, mj, ml.model_mm}, {points[a], points[b], points[cc]});
                         if (!fit)
                             continue;
                         // The points on a member (as memberNear() finds them, with each
                         // member placed once), given up once they can no longer beat the best.
                         placedMembers_.clear();
                         for (const Vec3& m : searchedMembers_)
-                            placedMembers_.push_back(fit->transform.apply(m));
+                            placedMembers_.push_back(fit->apply(m));
                         std::size_t count = 0;
                         for (std::size_t k = 0; k < c && count + (c - k) > bestCount; ++k)
                             count += std::any_of(placedMembers_.begin(), placedMembers_.end(),
@@ -224,7 +223,7 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
                                                  });
                         if (count > bestCount) {
                             bestCount = count;
-                            best = fit->transform;
+                            best = *fit;
                         }
                     }
                 }
