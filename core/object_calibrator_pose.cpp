@@ -1,6 +1,7 @@
 // Object calibration, step 2: each object's graph and pose from its visible members, elastic
 // edges, and the pose that predicts occluded markers.
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "core/object_calibrator.hpp"
@@ -215,15 +216,20 @@ std::optional<ObjectCalibrator::ConsensusPose> ObjectCalibrator::consensusPose()
             c = (std::max(a, b) + 1) % n;
         if (c == a || c == b)
             continue;
-        const Vec3 from[3] = {fitFrom_[a], fitFrom_[b], fitFrom_[c]};
-        const Vec3 to[3] = {fitTo_[a], fitTo_[b], fitTo_[c]};
-        const std::optional<RigidFit> fit = fitRigid(from, to);
-        if (!fit || fit->rms_mm > config_.poseInlier_mm)
+        const std::array<Vec3, 3> from = {fitFrom_[a], fitFrom_[b], fitFrom_[c]};
+        const std::array<Vec3, 3> to = {fitTo_[a], fitTo_[b], fitTo_[c]};
+        const std::optional<RigidTransform> fit = fitTriangle(from, to);
+        if (!fit)
             continue;
-        const double count = countInliers(fit->transform);
+        double squares = 0.0;
+        for (std::size_t k = 0; k < 3; ++k)
+            squares += (to[k] - fit->apply(from[k])).squaredNorm();
+        if (std::sqrt(squares / 3.0) > config_.poseInlier_mm)
+            continue;
+        const double count = countInliers(*fit);
         if (count > bestCount) {
             bestCount = count;
-            best = fit->transform;
+            best = *fit;
         }
     }
     if (!best)
