@@ -5,9 +5,10 @@
 //
 // BM_CalibrationFrame is the online stage's typical frame once the models have formed;
 // BM_CalibrationSession runs whole 30-s sessions from an empty calibration and reports the mean,
-// 99th percentile and worst frame (the worst is the start, when every marker in view is one object
-// and the clustering works on its densest graph); BM_Completion is the completion stage of a 30-s
-// session, which runs once when the session ends, off the frame loop.
+// 99th percentile and worst frame (for three_cubes the start, when every marker in view is one
+// object and the clustering works on its densest graph; for the crowd a check for duplicates by
+// layout late in the session, with 14 objects alive); BM_Completion is the completion stage of a
+// 30-s session, which runs once when the session ends, off the frame loop.
 #include <algorithm>
 #include <chrono>
 #include <optional>
