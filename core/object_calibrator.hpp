@@ -343,6 +343,10 @@ private:
     /// (mm, any frame): the transform from \a o's frame to the points' frame, found from
     /// congruent triangles; nothing unless at least \a minPoints and \a share of the
     /// points sit on members, all of them within the pose threshold after a joint fit.
+    /// The scratch of fitLayout() for \a o's members that \a which names: their pairs by
+    /// distance (memberPairs_), by first member (pairsByMember_) and their places
+    /// (searchedMembers_); false when they make fewer than six pairs.
+    bool indexMemberPairs(const Object& o, Members which);
     std::optional<RigidTransform> fitLayout(const Object& o, std::span<const Vec3> points,
                                             Members which,
                                             std::size_t minPoints = kRefindMinMarkers,

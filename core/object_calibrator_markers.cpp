@@ -115,12 +115,7 @@ void ObjectCalibrator::insertNewMarkers(std::span<const TrackedMarker> tracked) 
     o->T_rig_from_object = RigidTransform::identity();
 }
 
-std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
-                                                          std::span<const Vec3> points,
-                                                          Members which, std::size_t minPoints,
-                                                          double share) {
-    if (points.size() < minPoints)
-        return std::nullopt;
+bool ObjectCalibrator::indexMemberPairs(const Object& o, Members which) {
     auto searched = [this, which](const Member& m) { return selects(which, m); };
     // Member pairs sorted by distance, so a candidate pair's distance finds its model pairs fast.
     memberPairs_.clear();
@@ -134,7 +129,7 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
                     {(o.members[i].model_mm - o.members[j].model_mm).norm(), i, j});
     }
     if (memberPairs_.size() < 6)
-        return std::nullopt;
+        return false;
     std::sort(
         memberPairs_.begin(), memberPairs_.end(),
         [](const MemberPair& a, const MemberPair& b) { return a.distance_mm < b.distance_mm; });
@@ -159,6 +154,17 @@ std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
     for (const Member& m : o.members)
         if (searched(m))
             searchedMembers_.push_back(m.model_mm);
+    return true;
+}
+
+std::optional<RigidTransform> ObjectCalibrator::fitLayout(const Object& o,
+                                                          std::span<const Vec3> points,
+                                                          Members which, std::size_t minPoints,
+                                                          double share) {
+    if (points.size() < minPoints)
+        return std::nullopt;
+    if (!indexMemberPairs(o, which))
+        return std::nullopt;
     const double radius2 = config_.reappearRadius_mm * config_.reappearRadius_mm;
     const double tol = config_.smin.tolerance_mm;
     const auto byDistance = [](const MemberPair& p, double d) { return p.distance_mm < d; };
