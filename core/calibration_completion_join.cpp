@@ -19,10 +19,6 @@ namespace {
 
 /// Relative poses tried as the consensus of two objects' motion.
 constexpr std::size_t kConsensusCandidates = 32;
-/// Two models' markers are the same marker when one model registered onto the other puts them
-/// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
-/// four markers of one random layout already land on four of another by chance.
-constexpr double kRegistrationTolerance_mm = 0.5;
 /// A piece leaving and another coming into view within this many frames is a handover whose
 /// motion two pieces tied by a triangle must explain.
 constexpr std::size_t kSmoothGap_frames = 10;

@@ -68,6 +68,11 @@ struct Registration {
 Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> whole,
                             double tolerance_mm, double matchTolerance_mm);
 
+/// Two models' markers are the same marker when one model registered onto the other puts them
+/// this close (mm): models are measured over hundreds of frames to well under 0.1 mm, and at 1 mm
+/// four markers of one random layout already land on four of another by chance.
+inline constexpr double kRegistrationTolerance_mm = 0.5;
+
 /// What a tie of two layouts by one shared triangle must satisfy (soleSharedTriangle).
 struct TriangleTieLimits {
     /// The shared triangle's sides agree within this (mm).
@@ -90,12 +95,12 @@ struct TriangleTieLimits {
 /// of triangles nearly always held a second likeness and the true tie was refused, while chance
 /// likenesses of two objects matched at 0.14-0.75 mm. It is unique when no other pair of
 /// triangles comes within four times the tolerance on every side, and it must place the far
-/// markers of the piece it places within a registration's 0.5 mm. Side comparisons stop at two
-/// million (two pieces of 30 markers each have 4,060 triangles).
+/// markers of the piece it places within a registration's tolerance. Side comparisons stop at
+/// two million (two pieces of 30 markers each have 4,060 triangles).
 inline constexpr TriangleTieLimits kTriangleTie{.tolerance_mm = 0.1,
                                                 .uniqueness_mm = 0.4,
                                                 .precision_mm = 0.05,
-                                                .placement_mm = 0.5,
+                                                .placement_mm = kRegistrationTolerance_mm,
                                                 .budget = 2000000};
 
 /**
