@@ -19,7 +19,8 @@ namespace edgetrack {
 
 namespace completion_detail {
 struct SortedTriangle;
-}
+class TrianglesByLongestSide;
+} // namespace completion_detail
 
 /// \brief Settings of the completion stage; defaults suit hand-held objects at 100 Hz.
 struct CompletionConfig {
@@ -264,7 +265,7 @@ private:
     /// every job's own triangles, by longest side, with SortedTriangle::body naming the job.
     void poseFromTriangles(std::span<const Vec3> free,
                            std::span<const completion_detail::SortedTriangle> seenTriangles,
-                           std::span<const completion_detail::SortedTriangle> owned,
+                           const completion_detail::TrianglesByLongestSide& owned,
                            std::span<TriangleJob> jobs, std::size_t f) const;
     /// The poses from triangles that lie in runs of poses following on from each other, into
     /// \a job's body.

@@ -52,18 +52,16 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
                 all[i].unique = false;
                 all[j].unique = false;
             }
+    std::vector<TriangleJob> ofBody(bodies_.size());
+    for (const SortedTriangle& t : all)
+        if (t.unique && wellShaped(t, tol))
+            ofBody[t.body].own.push_back(t);
     std::vector<TriangleJob> jobs;
-    for (std::size_t index = 0; index < bodies_.size(); ++index) {
-        if (!bodies_[index].alive)
-            continue;
-        TriangleJob job;
-        job.body = &bodies_[index];
-        for (const SortedTriangle& t : all)
-            if (t.body == index && t.unique && wellShaped(t, tol))
-                job.own.push_back(t);
-        if (!job.own.empty())
-            jobs.push_back(std::move(job));
-    }
+    for (std::size_t index = 0; index < bodies_.size(); ++index)
+        if (!ofBody[index].own.empty()) {
+            ofBody[index].body = &bodies_[index];
+            jobs.push_back(std::move(ofBody[index]));
+        }
     poseFromTriangles(session, jobs);
 }
 
@@ -102,19 +100,21 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
 
     // Every job's own triangles in one list by longest side (each job's in its own order), so
     // that a frame's triangle is looked up once for all of them.
-    std::vector<SortedTriangle> owned;
+    std::vector<SortedTriangle> ofJobs;
     for (std::size_t j = 0; j < jobs.size(); ++j)
         for (SortedTriangle t : jobs[j].own) {
             t.body = j;
-            owned.push_back(t);
+            ofJobs.push_back(t);
         }
-    std::stable_sort(owned.begin(), owned.end(), shorterLongestSide);
+    const TrianglesByLongestSide owned(ofJobs, tol);
 
     // Points another body's pose explains are looked at too: where two pieces of one object
     // share markers, the tracker gives the shared points to one of them only, and the other piece
     // would never be seen posed with it. So a frame's triangles of points are the same for every
     // body, and are made once.
     std::vector<SortedTriangle> seenTriangles;
+    std::vector<double> distances_mm;
+    std::vector<std::size_t> bins;
     for (std::size_t f = 0; f < frames; ++f) {
         const std::span<const Vec3> free = session.points(f);
         if (free.size() < 3 || free.size() > config_.maxTrianglePoints)
@@ -125,15 +125,34 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
                 longest = std::max(longest, job.longest);
         if (!(longest > 0.0))
             continue;
+        // Each distance and its bin once: most triples have a side too long to be any body's,
+        // and most of the rest are like none of the bodies' triangles, which the bins of their
+        // sides tell without making the triangle.
+        const auto n = static_cast<std::uint32_t>(free.size());
+        distances_mm.resize(static_cast<std::size_t>(n) * n);
+        bins.resize(static_cast<std::size_t>(n) * n);
+        for (std::uint32_t i = 0; i < n; ++i)
+            for (std::uint32_t j = i + 1; j < n; ++j) {
+                distances_mm[i * n + j] = (free[i] - free[j]).norm();
+                bins[i * n + j] = owned.binOf(distances_mm[i * n + j]);
+            }
         seenTriangles.clear();
-        for (std::uint32_t i = 0; i < free.size(); ++i)
-            for (std::uint32_t j = i + 1; j < free.size(); ++j) {
-                if ((free[i] - free[j]).norm() > longest)
+        for (std::uint32_t i = 0; i < n; ++i)
+            for (std::uint32_t j = i + 1; j < n; ++j) {
+                const double ij = distances_mm[i * n + j];
+                if (ij > longest)
                     continue;
-                for (std::uint32_t k = j + 1; k < free.size(); ++k) {
-                    const SortedTriangle seen = sortedTriangle(free[i], free[j], free[k], i, j, k);
-                    if (seen.sides_mm[2] <= longest)
-                        seenTriangles.push_back(seen);
+                const std::size_t binIJ = bins[i * n + j];
+                for (std::uint32_t k = j + 1; k < n; ++k) {
+                    const double ik = distances_mm[i * n + k], jk = distances_mm[j * n + k];
+                    if (ik > longest || jk > longest)
+                        continue;
+                    const std::size_t binIK = bins[i * n + k], binJK = bins[j * n + k];
+                    const std::size_t longestBin = std::max({binIJ, binIK, binJK});
+                    const std::size_t middleBin =
+                        std::max(std::min(binIJ, binIK), std::min(std::max(binIJ, binIK), binJK));
+                    if (owned.mayHoldNear(longestBin, middleBin))
+                        seenTriangles.push_back(sortedTriangle(jk, ik, ij, i, j, k));
                 }
             }
         poseFromTriangles(free, seenTriangles, owned, jobs, f);
@@ -145,7 +164,7 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session,
 
 void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
                                               std::span<const SortedTriangle> seenTriangles,
-                                              std::span<const SortedTriangle> owned,
+                                              const TrianglesByLongestSide& owned,
                                               std::span<TriangleJob> jobs, std::size_t f) const {
     const double tol = config_.triangleTolerance_mm;
     const double radius = kRefineRadiusFactor * config_.siteRadius_mm;
@@ -166,28 +185,26 @@ void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
     };
     std::vector<Choice> choices(jobs.size());
     for (const SortedTriangle& seen : seenTriangles) {
-        auto it =
-            std::lower_bound(owned.begin(), owned.end(), seen.sides_mm[2] - tol,
-                             [](const SortedTriangle& t, double s) { return t.sides_mm[2] < s; });
-        for (; it != owned.end() && it->sides_mm[2] <= seen.sides_mm[2] + tol; ++it) {
-            TriangleJob& job = jobs[it->body];
+        for (const SortedTriangle& own :
+             owned.within(seen.sides_mm[2] - tol, seen.sides_mm[2] + tol)) {
+            TriangleJob& job = jobs[own.body];
             const Body& body = *job.body;
-            if (body.posed[f] || !congruent(*it, seen, tol))
+            if (body.posed[f] || !congruent(own, seen, tol))
                 continue;
-            const std::array<Vec3, 3> from = {body.markers_mm[it->corners[0]],
-                                              body.markers_mm[it->corners[1]],
-                                              body.markers_mm[it->corners[2]]};
+            const std::array<Vec3, 3> from = {body.markers_mm[own.corners[0]],
+                                              body.markers_mm[own.corners[1]],
+                                              body.markers_mm[own.corners[2]]};
             const std::array<Vec3, 3> to = {free[seen.corners[0]], free[seen.corners[1]],
                                             free[seen.corners[2]]};
             const std::optional<RigidTransform> fit = fitTriangle(from, to);
-            if (!fit || !seenFromHere(job, *fit, it->corners[0]) ||
-                !seenFromHere(job, *fit, it->corners[1]) ||
-                !seenFromHere(job, *fit, it->corners[2]))
+            if (!fit || !seenFromHere(job, *fit, own.corners[0]) ||
+                !seenFromHere(job, *fit, own.corners[1]) ||
+                !seenFromHere(job, *fit, own.corners[2]))
                 continue;
             std::size_t support = 0;
             for (const Vec3& m : body.markers_mm)
                 support += nearestPoint(free, fit->apply(m), radius) != nullptr;
-            Choice& choice = choices[it->body];
+            Choice& choice = choices[own.body];
             if (support > choice.support) {
                 choice.support = support;
                 choice.best = *fit;

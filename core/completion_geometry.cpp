@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "core/rigid_fit.hpp"
@@ -111,10 +112,14 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
     };
     std::vector<Pair> pairs;
     pairs.reserve(m * (m - 1));
+    // Each distance once: every triangle's third corner is looked for among all of them.
+    std::vector<double> wholeDistance_mm(m * m, 0.0);
     for (std::uint32_t x = 0; x < m; ++x)
         for (std::uint32_t y = 0; y < m; ++y)
-            if (x != y)
-                pairs.push_back({(whole[x] - whole[y]).norm(), x, y});
+            if (x != y) {
+                wholeDistance_mm[x * m + y] = (whole[x] - whole[y]).norm();
+                pairs.push_back({wholeDistance_mm[x * m + y], x, y});
+            }
     std::sort(pairs.begin(), pairs.end(),
               [](const Pair& l, const Pair& r) { return l.d_mm < r.d_mm; });
     auto near = [&](double d_mm) {
@@ -143,11 +148,12 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
                     if (longest <= 0.0 || twiceArea / longest < kMinTriangleHeight_mm)
                         continue;
                     const double dac = (a - c).norm(), dbc = (b - c).norm();
-                    for (const Pair& xy : sidesAB)
+                    for (const Pair& xy : sidesAB) {
+                        const double* fromX = &wholeDistance_mm[xy.x * m];
+                        const double* fromY = &wholeDistance_mm[xy.y * m];
                         for (std::uint32_t z = 0; z < m; ++z) {
-                            if (z == xy.x || z == xy.y ||
-                                std::abs((whole[xy.x] - whole[z]).norm() - dac) > tolerance_mm ||
-                                std::abs((whole[xy.y] - whole[z]).norm() - dbc) > tolerance_mm)
+                            if (z == xy.x || z == xy.y || std::abs(fromX[z] - dac) > tolerance_mm ||
+                                std::abs(fromY[z] - dbc) > tolerance_mm)
                                 continue;
                             ++candidates;
                             const Vec3 tri[3] = {a, b, c};
@@ -159,6 +165,7 @@ Registration registerLayout(std::span<const Vec3> part, std::span<const Vec3> wh
                             const RigidTransform t = all ? all->transform : seed->transform;
                             placed(t, matchOn(t));
                         }
+                    }
                 }
             }
     };
@@ -190,27 +197,26 @@ std::optional<RigidTransform> soleSharedTriangle(std::span<const Vec3> part,
                                                  const TriangleTieLimits& limits) {
     if (part.size() < 3 || whole.size() < 3)
         return std::nullopt;
-    std::vector<SortedTriangle> ofPart, ofWhole;
+    std::vector<SortedTriangle> ofPart, triangles;
     appendTriangles(part, 0, ofPart);
-    appendTriangles(whole, 0, ofWhole);
+    appendTriangles(whole, 0, triangles);
+    const TrianglesByLongestSide ofWhole(triangles, limits.uniqueness_mm,
+                                         TrianglesByLongestSide::CellMap::None);
     auto longest = [](const SortedTriangle& t) { return t.sides_mm[2]; };
-    std::sort(ofWhole.begin(), ofWhole.end(), shorterLongestSide);
     const SortedTriangle* soleOfPart = nullptr;
     const SortedTriangle* soleOfWhole = nullptr;
     std::size_t compared = 0;
     for (const SortedTriangle& t : ofPart) {
-        auto it =
-            std::lower_bound(ofWhole.begin(), ofWhole.end(), longest(t) - limits.uniqueness_mm,
-                             [&](const SortedTriangle& w, double v) { return longest(w) < v; });
-        for (; it != ofWhole.end() && longest(*it) <= longest(t) + limits.uniqueness_mm; ++it) {
+        for (const SortedTriangle& w :
+             ofWhole.within(longest(t) - limits.uniqueness_mm, longest(t) + limits.uniqueness_mm)) {
             if (++compared > limits.budget)
                 return std::nullopt;
-            if (!congruent(t, *it, limits.uniqueness_mm))
+            if (!congruent(t, w, limits.uniqueness_mm))
                 continue;
             if (soleOfPart != nullptr)
                 return std::nullopt; // a second likeness: the shared triangle is no identity
             soleOfPart = &t;
-            soleOfWhole = &*it;
+            soleOfWhole = &w;
         }
     }
     if (soleOfPart == nullptr || !congruent(*soleOfPart, *soleOfWhole, limits.tolerance_mm) ||
@@ -259,6 +265,59 @@ void appendTriangles(std::span<const Vec3> layout, std::size_t body,
             }
 }
 
+TrianglesByLongestSide::TrianglesByLongestSide(std::span<const SortedTriangle> triangles,
+                                               double binWidth_mm, CellMap map)
+    : binWidth_mm_(binWidth_mm > 0.0 ? binWidth_mm : 1.0)
+    , perBin_(1.0 / binWidth_mm_) {
+    // Sorted by bin (counting), then within each bin: a layout of 40 markers has ten thousand
+    // triangles, and a sort of them all was the larger part of a layout comparison.
+    std::size_t bins = 0;
+    for (const SortedTriangle& t : triangles)
+        bins = std::max(bins, binOf(t.sides_mm[2]) + 1);
+    binStart_.assign(bins + 1, 0);
+    for (const SortedTriangle& t : triangles)
+        ++binStart_[binOf(t.sides_mm[2]) + 1];
+    for (std::size_t b = 0; b < bins; ++b)
+        binStart_[b + 1] += binStart_[b];
+    triangles_.resize(triangles.size());
+    {
+        std::vector<std::uint32_t> next(binStart_.begin(), binStart_.end() - 1);
+        for (const SortedTriangle& t : triangles)
+            triangles_[next[binOf(t.sides_mm[2])]++] = t;
+    }
+    for (std::size_t b = 0; b < bins; ++b)
+        std::stable_sort(triangles_.begin() + binStart_[b], triangles_.begin() + binStart_[b + 1],
+                         shorterLongestSide);
+    longest_mm_.reserve(triangles_.size());
+    for (const SortedTriangle& t : triangles_)
+        longest_mm_.push_back(t.sides_mm[2]);
+    if (map == CellMap::None)
+        return;
+    // A middle side is never longer than the longest, so one bin count serves both.
+    cells_ = bins + 1;
+    nearCell_.assign(cells_ * cells_, 0);
+    for (const SortedTriangle& t : triangles_) {
+        const std::size_t l = binOf(t.sides_mm[2]), m = binOf(t.sides_mm[1]);
+        for (std::size_t nl = l > 0 ? l - 1 : 0; nl <= l + 1 && nl < cells_; ++nl)
+            for (std::size_t nm = m > 0 ? m - 1 : 0; nm <= m + 1 && nm < cells_; ++nm)
+                nearCell_[nl * cells_ + nm] = 1;
+    }
+}
+
+std::span<const SortedTriangle> TrianglesByLongestSide::within(double from_mm, double to_mm) const {
+    if (triangles_.empty() || !(from_mm <= to_mm) || to_mm < longest_mm_.front())
+        return {};
+    const std::size_t last = binStart_.size() - 1;
+    const std::size_t fromBin = std::min(binOf(from_mm), last);
+    const std::size_t toBin = std::min(binOf(to_mm) + 1, last);
+    const auto begin = longest_mm_.begin();
+    const auto first =
+        std::lower_bound(begin + binStart_[fromBin], begin + binStart_[toBin], from_mm);
+    const auto end = std::upper_bound(first, begin + binStart_[toBin], to_mm);
+    return std::span(triangles_)
+        .subspan(static_cast<std::size_t>(first - begin), static_cast<std::size_t>(end - first));
+}
+
 double medianOf(std::vector<double>& values) {
     const auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
     std::nth_element(values.begin(), middle, values.end());
@@ -272,22 +331,26 @@ bool nearAny(std::span<const Vec3> points, const Vec3& p, double radius2_mm2) {
 
 SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
                               std::uint32_t ib, std::uint32_t ic) {
+    return sortedTriangle((b - c).norm(), (a - c).norm(), (a - b).norm(), ia, ib, ic);
+}
+
+SortedTriangle sortedTriangle(double facingA_mm, double facingB_mm, double facingC_mm,
+                              std::uint32_t ia, std::uint32_t ib, std::uint32_t ic) {
     std::array<std::pair<double, std::uint32_t>, 3> facing = {
-        {{(b - c).norm(), ia}, {(a - c).norm(), ib}, {(a - b).norm(), ic}}};
-    std::sort(facing.begin(), facing.end());
+        {{facingA_mm, ia}, {facingB_mm, ib}, {facingC_mm, ic}}};
+    // Three compare-and-swaps: this runs for every triple of points in every frame.
+    if (facing[1] < facing[0])
+        std::swap(facing[0], facing[1]);
+    if (facing[2] < facing[1])
+        std::swap(facing[1], facing[2]);
+    if (facing[1] < facing[0])
+        std::swap(facing[0], facing[1]);
     SortedTriangle t;
     for (std::size_t i = 0; i < 3; ++i) {
         t.sides_mm[i] = facing[i].first;
         t.corners[i] = facing[i].second;
     }
     return t;
-}
-
-bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm) {
-    for (std::size_t i = 0; i < 3; ++i)
-        if (std::abs(a.sides_mm[i] - b.sides_mm[i]) > tolerance_mm)
-            return false;
-    return true;
 }
 
 double triangleHeight(const SortedTriangle& t) {

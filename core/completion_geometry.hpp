@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -145,6 +146,11 @@ struct SortedTriangle {
 SortedTriangle sortedTriangle(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t ia,
                               std::uint32_t ib, std::uint32_t ic);
 
+/// The triangle whose corners \a ia, \a ib, \a ic face sides of \a facingA_mm, \a facingB_mm
+/// and \a facingC_mm, for callers that have the distances already.
+SortedTriangle sortedTriangle(double facingA_mm, double facingB_mm, double facingC_mm,
+                              std::uint32_t ia, std::uint32_t ib, std::uint32_t ic);
+
 /// Every triangle of \a layout's markers, appended to \a out with SortedTriangle::body = \a body.
 void appendTriangles(std::span<const Vec3> layout, std::size_t body,
                      std::vector<SortedTriangle>& out);
@@ -154,14 +160,70 @@ inline bool shorterLongestSide(const SortedTriangle& a, const SortedTriangle& b)
     return a.sides_mm[2] < b.sides_mm[2];
 }
 
+/**
+ * \brief Triangles ordered by their longest side, for finding those near a given one fast.
+ *
+ * The triangle step looks up every triangle of points of every frame (about a thousand a frame)
+ * among thousands of the bodies'. Most match none: a map of which (longest, middle side) cells of
+ * \a binWidth_mm hold a triangle within a cell tells so at one look, and the longest sides kept
+ * in an array of their own, binned, find the rest without a binary search over the triangles.
+ */
+class TrianglesByLongestSide {
+public:
+    /// Whether mayHoldNear() is wanted: its map takes (longest side / bin width)^2 bytes.
+    enum class CellMap { None, Built };
+
+    TrianglesByLongestSide() = default;
+    /// Orders \a triangles by longest side, stably (those of equal sides keep their order).
+    TrianglesByLongestSide(std::span<const SortedTriangle> triangles, double binWidth_mm,
+                           CellMap map = CellMap::Built);
+
+    /// The bin of a side of \a side_mm: sides within one bin width of each other lie in the same
+    /// bin or in bins side by side.
+    std::size_t binOf(double side_mm) const {
+        const double bin = side_mm * perBin_;
+        return bin > 0.0 ? static_cast<std::size_t>(bin) : 0;
+    }
+
+    /// False only when no triangle's longest and middle sides lie within a bin of the bins
+    /// \a longestBin and \a middleBin (so a triangle whose sides lie in those bins is like none
+    /// within the bin width). Always false without a CellMap.
+    bool mayHoldNear(std::size_t longestBin, std::size_t middleBin) const {
+        return longestBin < cells_ && middleBin < cells_ &&
+               nearCell_[longestBin * cells_ + middleBin] != 0;
+    }
+
+    /// Those whose longest side lies within [\a from_mm, \a to_mm], in order.
+    std::span<const SortedTriangle> within(double from_mm, double to_mm) const;
+
+    std::span<const SortedTriangle> all() const { return triangles_; }
+
+private:
+    std::vector<SortedTriangle> triangles_;
+    std::vector<double> longest_mm_;
+    /// binStart_[b]: the first triangle whose longest side is at least b bins; one past the last
+    /// bin, the count.
+    std::vector<std::uint32_t> binStart_;
+    /// Per (longest, middle) cell, row by longest, whether a triangle lies in it or a cell beside.
+    std::vector<std::uint8_t> nearCell_;
+    std::size_t cells_ = 0;
+    double binWidth_mm_ = 1.0;
+    double perBin_ = 1.0;
+};
+
 /// The median of \a values (the upper one of an even count); reorders them. Not empty.
 double medianOf(std::vector<double>& values);
 
 /// Whether any of \a points lies within sqrt(\a radius2_mm2) of \a p.
 bool nearAny(std::span<const Vec3> points, const Vec3& p, double radius2_mm2);
 
-/// Whether every side of \a a is within \a tolerance_mm of the same side of \a b.
-bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm);
+/// Whether every side of \a a is within \a tolerance_mm of the same side of \a b. Inline: the
+/// triangle steps compare millions of pairs.
+inline bool congruent(const SortedTriangle& a, const SortedTriangle& b, double tolerance_mm) {
+    return std::abs(a.sides_mm[2] - b.sides_mm[2]) <= tolerance_mm &&
+           std::abs(a.sides_mm[1] - b.sides_mm[1]) <= tolerance_mm &&
+           std::abs(a.sides_mm[0] - b.sides_mm[0]) <= tolerance_mm;
+}
 
 /// Its height over its longest side (mm).
 double triangleHeight(const SortedTriangle& t);

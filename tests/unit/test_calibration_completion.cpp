@@ -163,6 +163,67 @@ TEST(LayoutRegistration, PlacesAPieceByTheOneTriangleItSharesUnlessAnotherIsLike
         completion_detail::soleSharedTriangle(reaching, whole, completion_detail::kTriangleTie));
 }
 
+// The index the triangle steps look triangles up in must give what a scan of them all gives:
+// every triangle whose longest side lies in the window, in order of that side (equal sides in
+// the order given), and it may say "none near" only where a scan finds none within its bin width.
+TEST(TrianglesByLongestSide, FindsWhatAScanOfEveryTriangleFinds) {
+    using completion_detail::SortedTriangle;
+    std::mt19937 random(7);
+    std::uniform_real_distribution<double> coordinate(-40.0, 40.0);
+    std::vector<Vec3> layout;
+    for (int m = 0; m < 14; ++m)
+        layout.emplace_back(coordinate(random), coordinate(random), coordinate(random));
+    std::vector<SortedTriangle> triangles;
+    completion_detail::appendTriangles(layout, 0, triangles);
+    // Equal longest sides too, to show their order is kept.
+    for (std::size_t t = 0; t < 20; ++t) {
+        SortedTriangle copy = triangles[t];
+        copy.body = 1;
+        triangles.push_back(copy);
+    }
+    const double width = 0.75;
+    const completion_detail::TrianglesByLongestSide index(triangles, width);
+    std::vector<SortedTriangle> sorted = triangles;
+    std::stable_sort(sorted.begin(), sorted.end(), completion_detail::shorterLongestSide);
+    ASSERT_EQ(index.all().size(), sorted.size());
+    auto same = [](const SortedTriangle& a, const SortedTriangle& b) {
+        return a.sides_mm == b.sides_mm && a.corners == b.corners && a.body == b.body;
+    };
+    EXPECT_TRUE(std::equal(sorted.begin(), sorted.end(), index.all().begin(), same));
+
+    std::uniform_real_distribution<double> side(-5.0, 150.0);
+    std::size_t nearSome = 0, nearNone = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const double a = side(random), b = a + std::abs(side(random)) * 0.05;
+        std::vector<SortedTriangle> scanned;
+        for (const SortedTriangle& t : sorted)
+            if (t.sides_mm[2] >= a && t.sides_mm[2] <= b)
+                scanned.push_back(t);
+        const auto found = index.within(a, b);
+        ASSERT_EQ(found.size(), scanned.size()) << a << " " << b;
+        EXPECT_TRUE(std::equal(scanned.begin(), scanned.end(), found.begin(), same));
+
+        // A triangle of random sides: "none near" only when a scan finds none within the width.
+        std::array<double, 3> sides = {std::abs(side(random)), std::abs(side(random)),
+                                       std::abs(side(random))};
+        std::sort(sides.begin(), sides.end());
+        const bool anyNear =
+            std::any_of(sorted.begin(), sorted.end(), [&](const SortedTriangle& t) {
+                return std::abs(t.sides_mm[2] - sides[2]) <= width &&
+                       std::abs(t.sides_mm[1] - sides[1]) <= width;
+            });
+        const bool mayHold = index.mayHoldNear(index.binOf(sides[2]), index.binOf(sides[1]));
+        if (anyNear) {
+            EXPECT_TRUE(mayHold) << sides[0] << " " << sides[1] << " " << sides[2];
+        }
+        (mayHold ? nearSome : nearNone) += 1;
+    }
+    // And it does tell most of them apart, or it would save nothing.
+    EXPECT_GT(nearNone, nearSome);
+    EXPECT_TRUE(index.within(200.0, 100.0).empty());
+    EXPECT_TRUE(completion_detail::TrianglesByLongestSide({}, width).within(0.0, 1e9).empty());
+}
+
 TEST(SessionBuffer, KeepsEachFrameInOneOrderAndRefusesWhatDoesNotFit) {
     SessionBuffer session(2, 5);
     const std::vector<Vec3> frame{Vec3(3, 0, 0), Vec3(1, 2, 0), Vec3(1, 1, 5)};
