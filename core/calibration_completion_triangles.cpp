@@ -44,14 +44,8 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
     for (std::size_t b = 0; b < bodies_.size(); ++b)
         if (bodies_[b].alive)
             appendTriangles(bodies_[b].markers_mm, b, all);
+    markAlike(all, apart);
     std::sort(all.begin(), all.end(), shorterLongestSide);
-    for (std::size_t i = 0; i < all.size(); ++i)
-        for (std::size_t j = i + 1;
-             j < all.size() && all[j].sides_mm[2] - all[i].sides_mm[2] <= apart; ++j)
-            if (congruent(all[i], all[j], apart)) {
-                all[i].unique = false;
-                all[j].unique = false;
-            }
     std::vector<TriangleJob> ofBody(bodies_.size());
     for (const SortedTriangle& t : all)
         if (t.unique && wellShaped(t, tol))

@@ -265,6 +265,44 @@ void appendTriangles(std::span<const Vec3> layout, std::size_t body,
             }
 }
 
+void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm) {
+    if (triangles.size() < 2 || !(tolerance_mm > 0.0))
+        return;
+    const double perBin = 1.0 / tolerance_mm;
+    auto binOf = [&](double side_mm) {
+        const double bin = side_mm * perBin;
+        return bin > 0.0 ? static_cast<std::size_t>(bin) : std::size_t{0};
+    };
+    std::size_t bins = 0;
+    for (const SortedTriangle& t : triangles)
+        bins = std::max(bins, binOf(t.sides_mm[2]) + 1);
+    // Cells of (longest, middle) bins, with a margin of one on each side so that every
+    // neighbour of a cell exists; the triangles' indices counting-sorted by cell.
+    const std::size_t row = bins + 2;
+    auto cellOf = [&](const SortedTriangle& t) {
+        return (binOf(t.sides_mm[2]) + 1) * row + binOf(t.sides_mm[1]) + 1;
+    };
+    std::vector<std::uint32_t> cellStart(row * row + 1, 0);
+    for (const SortedTriangle& t : triangles)
+        ++cellStart[cellOf(t) + 1];
+    for (std::size_t c = 0; c + 1 < cellStart.size(); ++c)
+        cellStart[c + 1] += cellStart[c];
+    std::vector<std::uint32_t> inCell(triangles.size());
+    {
+        std::vector<std::uint32_t> next(cellStart.begin(), cellStart.end() - 1);
+        for (std::size_t i = 0; i < triangles.size(); ++i)
+            inCell[next[cellOf(triangles[i])]++] = static_cast<std::uint32_t>(i);
+    }
+    for (std::size_t i = 0; i < triangles.size(); ++i) {
+        SortedTriangle& t = triangles[i];
+        const std::size_t cell = cellOf(t);
+        for (std::size_t l = cell - row; l <= cell + row && t.unique; l += row)
+            for (std::size_t k = cellStart[l - 1]; k < cellStart[l + 2] && t.unique; ++k)
+                if (inCell[k] != i && congruent(t, triangles[inCell[k]], tolerance_mm))
+                    t.unique = false;
+    }
+}
+
 TrianglesByLongestSide::TrianglesByLongestSide(std::span<const SortedTriangle> triangles,
                                                double binWidth_mm, CellMap map)
     : binWidth_mm_(binWidth_mm > 0.0 ? binWidth_mm : 1.0)

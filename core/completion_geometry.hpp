@@ -160,6 +160,12 @@ inline bool shorterLongestSide(const SortedTriangle& a, const SortedTriangle& b)
     return a.sides_mm[2] < b.sides_mm[2];
 }
 
+/// Sets SortedTriangle::unique to false on each of \a triangles that another of them is congruent
+/// to within \a tolerance_mm. Looks only among triangles whose longest and middle sides lie in
+/// the same or neighbouring bins of that width: a scan by longest side alone compared each of
+/// the bodies' ten thousands of triangles with hundreds.
+void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm);
+
 /**
  * \brief Triangles ordered by their longest side, for finding those near a given one fast.
  *

@@ -224,6 +224,37 @@ TEST(TrianglesByLongestSide, FindsWhatAScanOfEveryTriangleFinds) {
     EXPECT_TRUE(completion_detail::TrianglesByLongestSide({}, width).within(0.0, 1e9).empty());
 }
 
+// The triangle step poses a body only by triangles no other one is like; markAlike must find
+// every such likeness that a comparison of every pair finds, and no other.
+TEST(TrianglesByLongestSide, MarkAlikeMarksWhatEveryPairComparedMarks) {
+    using completion_detail::SortedTriangle;
+    std::mt19937 random(11);
+    std::uniform_real_distribution<double> coordinate(-30.0, 30.0);
+    std::vector<SortedTriangle> triangles;
+    for (std::size_t body = 0; body < 3; ++body) {
+        std::vector<Vec3> layout;
+        for (int m = 0; m < 12; ++m)
+            layout.emplace_back(coordinate(random), coordinate(random), coordinate(random));
+        completion_detail::appendTriangles(layout, body, triangles);
+    }
+    for (const double tolerance : {0.3, 3.0}) {
+        std::vector<SortedTriangle> marked = triangles;
+        completion_detail::markAlike(marked, tolerance);
+        std::size_t alike = 0;
+        for (std::size_t i = 0; i < triangles.size(); ++i) {
+            bool expected = true;
+            for (std::size_t j = 0; j < triangles.size() && expected; ++j)
+                expected =
+                    j == i || !completion_detail::congruent(triangles[i], triangles[j], tolerance);
+            ASSERT_EQ(marked[i].unique, expected) << i << " at " << tolerance << " mm";
+            alike += expected ? 0U : 1U;
+        }
+        // Both kinds occur, or the comparison shows nothing.
+        EXPECT_GT(alike, 0U);
+        EXPECT_LT(alike, triangles.size());
+    }
+}
+
 TEST(SessionBuffer, KeepsEachFrameInOneOrderAndRefusesWhatDoesNotFit) {
     SessionBuffer session(2, 5);
     const std::vector<Vec3> frame{Vec3(3, 0, 0), Vec3(1, 2, 0), Vec3(1, 1, 5)};
