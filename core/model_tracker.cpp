@@ -5,6 +5,7 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 #include <Eigen/Eigenvalues>
 
@@ -126,6 +127,9 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     match_.fitted.assign(models_.maxMarkers, -1);
     match_.fitFrom = BoundedVector<Vec3>(models_.maxMarkers);
     match_.fitTo = BoundedVector<Vec3>(models_.maxMarkers);
+    match_.leftOutRms.assign(models_.maxMarkers, 0.0);
+    match_.fitOrder.assign(models_.maxMarkers, 0);
+    match_.fitMarker.assign(models_.maxMarkers, 0);
 }
 
 void ModelTracker::reset() {
@@ -239,15 +243,20 @@ void ModelTracker::accept(std::size_t body, PoseSource source, const Hypothesis&
 }
 
 std::optional<RigidFit> ModelTracker::fitMatches(std::size_t body, std::size_t leftOut) {
+    gatherMatches(body, leftOut);
+    return fitRigid(match_.fitFrom.span(), match_.fitTo.span());
+}
+
+void ModelTracker::gatherMatches(std::size_t body, std::size_t leftOut) {
     const std::span<const Vec3> model = modelMarkers(body);
     match_.fitFrom.clear();
     match_.fitTo.clear();
     for (std::size_t i = 0; i < model.size(); ++i)
         if (i != leftOut && match_.ofMarker[i] >= 0) {
+            match_.fitMarker[match_.fitFrom.size()] = static_cast<std::uint32_t>(i);
             match_.fitFrom.push_back(model[i]);
             match_.fitTo.push_back(frame_.points[static_cast<std::size_t>(match_.ofMarker[i])]);
         }
-    return fitRigid(match_.fitFrom.span(), match_.fitTo.span());
 }
 
 std::size_t ModelTracker::matchMarkers(std::size_t body, const RigidTransform& T_rig_from_model,
@@ -371,19 +380,49 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
     const std::span<const Vec3> model = modelMarkers(body);
     // An outlier pulls the fit towards itself, so it is judged against the fit of the others:
     // each match is left out in turn, and the one whose absence fits best is the suspect.
+    // The RMS of every leave-one-out fit comes from leaveOneOutRms, and only the suspect is
+    // fitted: a fit per match made trimming most of the tracker's time on large noisy layouts.
     const double suspicious_mm = 0.5 * rmsGate(body);
     for (int trim = 0; trim < kMaxTrims && matches > minMatches && rms_mm > suspicious_mm; ++trim) {
         double bestRms = rms_mm;
         std::size_t suspect = model.size();
         RigidTransform suspectFit;
-        for (std::size_t left = 0; left < model.size(); ++left) {
-            if (match_.ofMarker[left] < 0)
-                continue;
-            const std::optional<RigidFit> fit = fitMatches(body, left);
-            if (fit && fit->rms_mm < bestRms) {
-                bestRms = fit->rms_mm;
-                suspect = left;
-                suspectFit = fit->transform;
+        gatherMatches(body);
+        const std::size_t pairs = match_.fitFrom.size();
+        const std::span<double> leftOutRms = std::span(match_.leftOutRms).first(pairs);
+        if (leaveOneOutRms(match_.fitFrom.span(), match_.fitTo.span(), leftOutRms)) {
+            // Markers by their leave-one-out RMS (in marker order where equal); the first whose
+            // own fit exists (it is not collinear) and betters the current one is the suspect,
+            // as with a fit of each.
+            const std::span<std::uint32_t> order = std::span(match_.fitOrder).first(pairs);
+            const std::span<const std::uint32_t> markerOf =
+                std::span(match_.fitMarker).first(pairs);
+            std::iota(order.begin(), order.end(), 0U);
+            std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+                return leftOutRms[x] < leftOutRms[y] || (leftOutRms[x] == leftOutRms[y] && x < y);
+            });
+            for (const std::uint32_t pair : order) {
+                if (!(leftOutRms[pair] < rms_mm))
+                    break;
+                const std::size_t left = markerOf[pair];
+                const std::optional<RigidFit> fit = fitMatches(body, left);
+                if (fit && fit->rms_mm < bestRms) {
+                    bestRms = fit->rms_mm;
+                    suspect = left;
+                    suspectFit = fit->transform;
+                    break;
+                }
+            }
+        } else {
+            for (std::size_t left = 0; left < model.size(); ++left) {
+                if (match_.ofMarker[left] < 0)
+                    continue;
+                const std::optional<RigidFit> fit = fitMatches(body, left);
+                if (fit && fit->rms_mm < bestRms) {
+                    bestRms = fit->rms_mm;
+                    suspect = left;
+                    suspectFit = fit->transform;
+                }
             }
         }
         if (suspect == model.size())
@@ -566,8 +605,14 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
         from[i] = model[clique[i].marker];
         to[i] = frame_.points[clique[i].point];
     }
+    // Most cliques of a search fail the gate; their residual alone tells so, without the SVD.
+    // A margin of 1e-6 mm keeps the test fitRigid's wherever the two could differ.
+    const double gate = rmsGate(body);
+    const std::optional<double> rms = fitRms(from, to);
+    if (rms && *rms > gate + 1e-6)
+        return;
     const std::optional<RigidFit> fit = fitRigid(from, to);
-    if (!fit || fit->rms_mm > rmsGate(body))
+    if (!fit || fit->rms_mm > gate)
         return;
     RigidTransform pose = fit->transform;
     Hypothesis h;

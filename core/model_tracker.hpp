@@ -246,6 +246,8 @@ private:
     /// Least-squares fit of the model markers to their matches (match_.ofMarker), \a leftOut
     /// excepted.
     std::optional<RigidFit> fitMatches(std::size_t body, std::size_t leftOut = SIZE_MAX);
+    /// The pairs fitMatches() fits, into match_.fitFrom, fitTo and fitMarker.
+    void gatherMatches(std::size_t body, std::size_t leftOut = SIZE_MAX);
     bool budgetLeft() const { return frameChecks_ < config_.searchBudget; }
 
     ModelTrackingConfig config_;
@@ -302,6 +304,11 @@ private:
         std::vector<double> claimDistance;
         BoundedVector<Vec3> fitFrom{0};
         BoundedVector<Vec3> fitTo{0};
+        /// The marker of each pair in fitFrom / fitTo.
+        std::vector<std::uint32_t> fitMarker;
+        /// Outlier trimming: each pair's leave-one-out RMS (mm), and the pairs by it.
+        std::vector<double> leftOutRms;
+        std::vector<std::uint32_t> fitOrder;
     } match_;
     std::uint64_t frameChecks_ = 0;
 };

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <Eigen/SVD>
 
 namespace edgetrack {
@@ -80,6 +81,105 @@ std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
         (Quat(Eigen::AngleAxisd(std::atan2(sine, cosine), axis)) * tilt).normalized();
     transform.translation_mm = centroidTo - transform.rotation * centroidFrom;
     return transform;
+}
+
+namespace {
+
+/// The largest eigenvalue of the quaternion key matrix of \a m (sum of a b^T over centred pairs),
+/// which is the largest trace(R m) over rotations R: Newton's method on the characteristic
+/// polynomial, from \a above, a value no smaller than it ((|a|^2 + |b|^2) / 2 summed).
+std::optional<double> largestKeyEigenvalue(const Mat3& m, double above) {
+    const double sxx = m(0, 0), sxy = m(0, 1), sxz = m(0, 2);
+    const double syx = m(1, 0), syy = m(1, 1), syz = m(1, 2);
+    const double szx = m(2, 0), szy = m(2, 1), szz = m(2, 2);
+    Eigen::Matrix4d key;
+    key << sxx + syy + szz, syz - szy, szx - sxz, sxy - syx, //
+        syz - szy, sxx - syy - szz, sxy + syx, szx + sxz,    //
+        szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy,   //
+        sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz;
+    // lambda^4 + c2 lambda^2 + c1 lambda + c0: the key matrix has no trace.
+    const double c2 = -2.0 * m.squaredNorm();
+    const double c1 = -8.0 * m.determinant();
+    const double c0 = key.determinant();
+    double lambda = above;
+    for (int step = 0; step < 50; ++step) {
+        const double square = lambda * lambda;
+        const double value = ((square + c2) * lambda + c1) * lambda + c0;
+        const double slope = (4.0 * square + 2.0 * c2) * lambda + c1;
+        if (!(slope != 0.0))
+            return std::nullopt;
+        const double next = lambda - value / slope;
+        if (!std::isfinite(next))
+            return std::nullopt;
+        if (std::abs(next - lambda) <= 1e-11 * std::abs(next))
+            return next;
+        lambda = next;
+    }
+    return std::nullopt;
+}
+
+} // namespace
+
+std::optional<double> fitRms(std::span<const Vec3> from, std::span<const Vec3> to) {
+    const std::size_t n = from.size();
+    if (n != to.size() || n < 3)
+        return std::nullopt;
+    Vec3 centroidFrom = Vec3::Zero();
+    Vec3 centroidTo = Vec3::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+        centroidFrom += from[i];
+        centroidTo += to[i];
+    }
+    centroidFrom /= static_cast<double>(n);
+    centroidTo /= static_cast<double>(n);
+    Mat3 crossCovariance = Mat3::Zero();
+    double spread = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3 a = from[i] - centroidFrom, b = to[i] - centroidTo;
+        crossCovariance += a * b.transpose();
+        spread += a.squaredNorm() + b.squaredNorm();
+    }
+    const std::optional<double> lambda = largestKeyEigenvalue(crossCovariance, 0.5 * spread);
+    if (!lambda)
+        return std::nullopt;
+    return std::sqrt(std::max(0.0, spread - 2.0 * *lambda) / static_cast<double>(n));
+}
+
+bool leaveOneOutRms(std::span<const Vec3> from, std::span<const Vec3> to,
+                    std::span<double> rms_mm) {
+    const std::size_t n = from.size();
+    if (n != to.size() || n < 4 || rms_mm.size() < n)
+        return false;
+    Vec3 centroidFrom = Vec3::Zero();
+    Vec3 centroidTo = Vec3::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+        centroidFrom += from[i];
+        centroidTo += to[i];
+    }
+    centroidFrom /= static_cast<double>(n);
+    centroidTo /= static_cast<double>(n);
+    Mat3 crossCovariance = Mat3::Zero();
+    double spreadFrom = 0.0, spreadTo = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3 a = from[i] - centroidFrom, b = to[i] - centroidTo;
+        crossCovariance += a * b.transpose();
+        spreadFrom += a.squaredNorm();
+        spreadTo += b.squaredNorm();
+    }
+    // Without pair k the centroids move by -a_k / (n - 1) and -b_k / (n - 1), which takes
+    // n / (n - 1) times its own term out of each sum.
+    const double remaining = static_cast<double>(n - 1);
+    const double scale = static_cast<double>(n) / remaining;
+    for (std::size_t k = 0; k < n; ++k) {
+        const Vec3 a = from[k] - centroidFrom, b = to[k] - centroidTo;
+        const Mat3 m = crossCovariance - scale * a * b.transpose();
+        const double spread = spreadFrom + spreadTo - scale * (a.squaredNorm() + b.squaredNorm());
+        const std::optional<double> lambda = largestKeyEigenvalue(m, 0.5 * spread);
+        if (!lambda)
+            return false;
+        rms_mm[k] = std::sqrt(std::max(0.0, spread - 2.0 * *lambda) / remaining);
+    }
+    return true;
 }
 
 } // namespace edgetrack

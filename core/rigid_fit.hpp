@@ -38,4 +38,29 @@ std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec
 std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
                                           const std::array<Vec3, 3>& to);
 
+/**
+ * \brief The RMS (mm) of fitRigid(\a from, \a to) without the fit: from the largest eigenvalue of
+ * Horn's quaternion key matrix (see leaveOneOutRms). For hypothesis tests that refuse most of
+ * what they try on the residual alone. Accurate to about 1e-6 mm near zero and 1e-10 mm at
+ * 0.01 mm and above; like leaveOneOutRms it does not refuse collinear sets.
+ * \return nothing when the spans differ in size, hold fewer than three pairs, or Newton's method
+ * did not settle.
+ */
+std::optional<double> fitRms(std::span<const Vec3> from, std::span<const Vec3> to);
+
+/**
+ * \brief The RMS (mm) of fitRigid(\a from, \a to) with pair k left out, for every k, into
+ * \a rms_mm[k], without a fit per k.
+ *
+ * Leaving one pair out changes the centred cross-covariance by a rank-one term and the spreads by
+ * a scalar; the residual of the best rotation follows from the largest eigenvalue of Horn's
+ * quaternion key matrix, found by Newton's method on its characteristic polynomial (Theobald's
+ * QCP). For outlier trimming, which fitted every leave-one-out set in full: on large plate-like
+ * layouts with noisy points, most of a tracker's time. Unlike fitRigid it does not refuse
+ * collinear sets; a caller that takes one of them fits it with fitRigid.
+ * \return false when the spans differ in size, \a rms_mm is smaller, there are fewer than four
+ * pairs, or Newton's method did not settle for some k.
+ */
+bool leaveOneOutRms(std::span<const Vec3> from, std::span<const Vec3> to, std::span<double> rms_mm);
+
 } // namespace edgetrack

@@ -133,3 +133,67 @@ TEST(RigidFit, TriangleFitIsTheLeastSquaresFit) {
     EXPECT_FALSE(fitTriangle(line, corner));
     EXPECT_FALSE(fitTriangle(corner, line));
 }
+
+// Outlier trimming takes the RMS of every leave-one-out fit from leaveOneOutRms instead of a fit
+// each, and a search judges its cliques by fitRms: both must be fitRigid's, on noisy, planar,
+// outlying and tiny sets far from the origin.
+TEST(RigidFit, LeaveOneOutRmsIsThatOfTheFitWithoutEachPair) {
+    auto expectLikeFits = [](const std::vector<Vec3>& from, const std::vector<Vec3>& to) {
+        std::vector<double> rms(from.size(), -1.0);
+        ASSERT_TRUE(leaveOneOutRms(from, to, rms));
+        const std::optional<double> whole = fitRms(from, to);
+        ASSERT_TRUE(whole);
+        EXPECT_NEAR(*whole, fitRigid(from, to)->rms_mm, 1e-6 + 1e-8 * *whole);
+        for (std::size_t k = 0; k < from.size(); ++k) {
+            std::vector<Vec3> a = from, b = to;
+            a.erase(a.begin() + static_cast<std::ptrdiff_t>(k));
+            b.erase(b.begin() + static_cast<std::ptrdiff_t>(k));
+            const std::optional<RigidFit> fit = fitRigid(a, b);
+            ASSERT_TRUE(fit);
+            // Taken from spreads of thousands of mm^2, a residual near zero is known to about a
+            // micrometre; the tracker's lie at 0.01-1 mm, known to 1e-10.
+            EXPECT_NEAR(rms[k], fit->rms_mm, 1e-6 + 1e-8 * fit->rms_mm)
+                << k << " of " << a.size() + 1;
+        }
+    };
+    for (unsigned seed = 1; seed <= 20; ++seed) {
+        PointSets s = makeSets(4 + static_cast<int>(seed) * 2, 0.05 * seed, seed);
+        expectLikeFits(s.model_mm, s.rig_mm);
+        // One point 5 mm off: its own leave-one-out fits best.
+        s.rig_mm[seed % s.rig_mm.size()] += Vec3(3.0, -4.0, 0.0);
+        std::vector<double> rms(s.model_mm.size());
+        ASSERT_TRUE(leaveOneOutRms(s.model_mm, s.rig_mm, rms));
+        EXPECT_EQ(static_cast<std::size_t>(std::min_element(rms.begin(), rms.end()) - rms.begin()),
+                  seed % s.rig_mm.size());
+        expectLikeFits(s.model_mm, s.rig_mm);
+        // Flat, as markers on a plate are.
+        for (Vec3& p : s.model_mm)
+            p.z() = 0.0;
+        PointSets flat = s;
+        for (std::size_t i = 0; i < flat.model_mm.size(); ++i)
+            flat.rig_mm[i] = s.T_rig_from_model.apply(flat.model_mm[i]) +
+                             Vec3(0.01 * static_cast<double>(i % 3), -0.02, 0.0);
+        expectLikeFits(flat.model_mm, flat.rig_mm);
+    }
+    // Exact, and a square of four (each three left are a right triangle).
+    PointSets exact = makeSets(9, 0.0, 3);
+    expectLikeFits(exact.model_mm, exact.rig_mm);
+    const std::vector<Vec3> square = {{0, 0, 0}, {40, 0, 0}, {40, 40, 0}, {0, 40, 0}};
+    std::vector<Vec3> placed;
+    for (const Vec3& p : square)
+        placed.push_back(exact.T_rig_from_model.apply(p) + Vec3(0.1, 0.0, -0.05));
+    expectLikeFits(square, placed);
+    // Refused: too few pairs, or unequal spans.
+    std::vector<double> rms(4);
+    EXPECT_FALSE(leaveOneOutRms(std::span(square).first(3), std::span(placed).first(3), rms));
+    EXPECT_FALSE(leaveOneOutRms(square, std::span(placed).first(3), rms));
+    EXPECT_FALSE(fitRms(std::span(square).first(2), std::span(placed).first(2)));
+    // A mirror image has the same distances but no rotation onto it.
+    std::vector<Vec3> mirrored;
+    const PointSets tetra = makeSets(4, 0.0, 5);
+    for (const Vec3& p : tetra.rig_mm)
+        mirrored.emplace_back(-p.x(), p.y(), p.z());
+    EXPECT_NEAR(*fitRms(tetra.model_mm, mirrored), fitRigid(tetra.model_mm, mirrored)->rms_mm,
+                1e-8);
+    EXPECT_GT(fitRigid(tetra.model_mm, mirrored)->rms_mm, 1.0);
+}
