@@ -85,6 +85,32 @@ std::optional<RigidTransform> fitTriangle(const std::array<Vec3, 3>& from,
 
 namespace {
 
+/// The centroids of two point sets and the sum of (from_i - centroid)(to_i - centroid)^T with
+/// the two spreads (sums of squared distances from the centroids), for the closed-form RMS.
+struct CentredSums {
+    Vec3 centroidFrom = Vec3::Zero();
+    Vec3 centroidTo = Vec3::Zero();
+    Mat3 crossCovariance = Mat3::Zero();
+    double spread = 0.0;
+};
+
+CentredSums centredSums(std::span<const Vec3> from, std::span<const Vec3> to) {
+    const std::size_t n = from.size();
+    CentredSums sums;
+    for (std::size_t i = 0; i < n; ++i) {
+        sums.centroidFrom += from[i];
+        sums.centroidTo += to[i];
+    }
+    sums.centroidFrom /= static_cast<double>(n);
+    sums.centroidTo /= static_cast<double>(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3 a = from[i] - sums.centroidFrom, b = to[i] - sums.centroidTo;
+        sums.crossCovariance += a * b.transpose();
+        sums.spread += a.squaredNorm() + b.squaredNorm();
+    }
+    return sums;
+}
+
 /// The largest eigenvalue of the quaternion key matrix of \a m (sum of a b^T over centred pairs),
 /// which is the largest trace(R m) over rotations R: Newton's method on the characteristic
 /// polynomial, from \a above, a value no smaller than it ((|a|^2 + |b|^2) / 2 summed).
@@ -124,25 +150,12 @@ std::optional<double> fitRms(std::span<const Vec3> from, std::span<const Vec3> t
     const std::size_t n = from.size();
     if (n != to.size() || n < 3)
         return std::nullopt;
-    Vec3 centroidFrom = Vec3::Zero();
-    Vec3 centroidTo = Vec3::Zero();
-    for (std::size_t i = 0; i < n; ++i) {
-        centroidFrom += from[i];
-        centroidTo += to[i];
-    }
-    centroidFrom /= static_cast<double>(n);
-    centroidTo /= static_cast<double>(n);
-    Mat3 crossCovariance = Mat3::Zero();
-    double spread = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3 a = from[i] - centroidFrom, b = to[i] - centroidTo;
-        crossCovariance += a * b.transpose();
-        spread += a.squaredNorm() + b.squaredNorm();
-    }
-    const std::optional<double> lambda = largestKeyEigenvalue(crossCovariance, 0.5 * spread);
+    const CentredSums sums = centredSums(from, to);
+    const std::optional<double> lambda =
+        largestKeyEigenvalue(sums.crossCovariance, 0.5 * sums.spread);
     if (!lambda)
         return std::nullopt;
-    return std::sqrt(std::max(0.0, spread - 2.0 * *lambda) / static_cast<double>(n));
+    return std::sqrt(std::max(0.0, sums.spread - 2.0 * *lambda) / static_cast<double>(n));
 }
 
 bool leaveOneOutRms(std::span<const Vec3> from, std::span<const Vec3> to,
@@ -150,30 +163,15 @@ bool leaveOneOutRms(std::span<const Vec3> from, std::span<const Vec3> to,
     const std::size_t n = from.size();
     if (n != to.size() || n < 4 || rms_mm.size() < n)
         return false;
-    Vec3 centroidFrom = Vec3::Zero();
-    Vec3 centroidTo = Vec3::Zero();
-    for (std::size_t i = 0; i < n; ++i) {
-        centroidFrom += from[i];
-        centroidTo += to[i];
-    }
-    centroidFrom /= static_cast<double>(n);
-    centroidTo /= static_cast<double>(n);
-    Mat3 crossCovariance = Mat3::Zero();
-    double spreadFrom = 0.0, spreadTo = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-        const Vec3 a = from[i] - centroidFrom, b = to[i] - centroidTo;
-        crossCovariance += a * b.transpose();
-        spreadFrom += a.squaredNorm();
-        spreadTo += b.squaredNorm();
-    }
+    const CentredSums sums = centredSums(from, to);
     // Without pair k the centroids move by -a_k / (n - 1) and -b_k / (n - 1), which takes
     // n / (n - 1) times its own term out of each sum.
     const double remaining = static_cast<double>(n - 1);
     const double scale = static_cast<double>(n) / remaining;
     for (std::size_t k = 0; k < n; ++k) {
-        const Vec3 a = from[k] - centroidFrom, b = to[k] - centroidTo;
-        const Mat3 m = crossCovariance - scale * a * b.transpose();
-        const double spread = spreadFrom + spreadTo - scale * (a.squaredNorm() + b.squaredNorm());
+        const Vec3 a = from[k] - sums.centroidFrom, b = to[k] - sums.centroidTo;
+        const Mat3 m = sums.crossCovariance - scale * a * b.transpose();
+        const double spread = sums.spread - scale * (a.squaredNorm() + b.squaredNorm());
         const std::optional<double> lambda = largestKeyEigenvalue(m, 0.5 * spread);
         if (!lambda)
             return false;
