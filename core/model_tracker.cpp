@@ -130,6 +130,8 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
     match_.leftOutRms.assign(models_.maxMarkers, 0.0);
     match_.fitOrder.assign(models_.maxMarkers, 0);
     match_.fitMarker.assign(models_.maxMarkers, 0);
+    match_.firstMatches.assign(models_.maxMarkers, -1);
+    match_.refused.assign(kRememberedRefusals * models_.maxMarkers, -1);
 }
 
 void ModelTracker::reset() {
@@ -306,15 +308,42 @@ std::size_t ModelTracker::matchMarkers(std::size_t body, const RigidTransform& T
 }
 
 bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, double firstRadius_mm,
-                          std::size_t minMatches, Hypothesis& out) {
+                          std::size_t minMatches, Hypothesis& out, bool rememberRefusals) {
     const std::span<const Vec3> model = modelMarkers(body);
+    const std::span<std::int32_t> firstMatches = std::span(match_.firstMatches).first(model.size());
+    // Everything after the first matching follows from its matches alone (each fit from the
+    // matches, each matching from the fit, the gate and the trim from the body's history, which
+    // is fixed within a frame), so a search remembers the first matches it refused, and a clique
+    // that matches as one of those is refused at once. A body whose layout is a little off is
+    // matched whole by most of its cliques and refused by the gate each time: half a million
+    // times in one completion pass (random_objects seed 100).
+    auto refuse = [&] {
+        if (rememberRefusals) {
+            std::copy(firstMatches.begin(), firstMatches.end(),
+                      match_.refused.begin() +
+                          static_cast<std::ptrdiff_t>(match_.refusedNext * model.size()));
+            match_.refusedNext = (match_.refusedNext + 1) % kRememberedRefusals;
+            match_.refusedCount = std::min(match_.refusedCount + 1, kRememberedRefusals);
+        }
+        return false;
+    };
     double radius = firstRadius_mm;
     std::size_t matches = 0;
     bool fitted = false;
     for (int pass = 0; pass < kMaxPasses; ++pass) {
         matches = matchMarkers(body, T_rig_from_model, radius);
         if (matches < std::max<std::size_t>(minMatches, 3))
-            return false;
+            return pass == 0 ? false : refuse();
+        if (pass == 0 && rememberRefusals) {
+            std::copy_n(match_.ofMarker.begin(), model.size(), firstMatches.begin());
+            for (std::size_t r = 0; r < match_.refusedCount; ++r)
+                if (std::equal(firstMatches.begin(), firstMatches.end(),
+                               match_.refused.begin() +
+                                   static_cast<std::ptrdiff_t>(r * model.size()))) {
+                    ++counters_.repeatedRefusals;
+                    return false;
+                }
+        }
         // The same matches as the last fit: that fit is the answer.
         if (fitted &&
             std::equal(match_.ofMarker.begin(),
@@ -323,7 +352,7 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
             break;
         const std::optional<RigidFit> fit = fitMatches(body);
         if (!fit)
-            return false;
+            return refuse();
         T_rig_from_model = fit->transform;
         out.rms_mm = fit->rms_mm;
         std::copy_n(match_.ofMarker.begin(), model.size(), match_.fitted.begin());
@@ -337,10 +366,10 @@ bool ModelTracker::refine(std::size_t body, RigidTransform& T_rig_from_model, do
     out.T_rig_from_model = T_rig_from_model;
     out.markers = static_cast<std::uint32_t>(matches);
     if (out.rms_mm > rmsGate(body))
-        return false;
+        return refuse();
     if (!spreadOffOneLine(body)) {
         ++counters_.degeneratePoses;
-        return false;
+        return refuse();
     }
     return true;
 }
@@ -460,6 +489,8 @@ void ModelTracker::search(std::size_t body, double time_s) {
         frame_.distancesReady = true;
     }
     std::fill_n(frame_.explained.begin(), frame_.count, std::uint8_t{0});
+    match_.refusedCount = 0;
+    match_.refusedNext = 0;
     Hypothesis best;
     bool haveBest = false;
     for (std::size_t p = 0; p < frame_.count; ++p) {
@@ -616,7 +647,8 @@ void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> c
         return;
     RigidTransform pose = fit->transform;
     Hypothesis h;
-    if (!refine(body, pose, config_.matchRadius_mm, models_.slots[body].sMin, h))
+    if (!refine(body, pose, config_.matchRadius_mm, models_.slots[body].sMin, h,
+                /*rememberRefusals=*/true))
         return;
     for (std::size_t i = 0; i < models_.slots[body].markerCount; ++i)
         if (match_.ofMarker[i] >= 0)

@@ -107,6 +107,8 @@ struct ModelTrackingCounters {
     std::uint64_t searchesSkipped = 0;    ///< searches not run or cut short by the budget
     std::uint64_t identityYields = 0;     ///< hypotheses left to a copy that was nearer to them
     std::uint64_t degeneratePoses = 0;    ///< poses refused: their markers lie on one line
+    /// Search hypotheses refused at once: their first matches were refused before in the search.
+    std::uint64_t repeatedRefusals = 0;
 };
 
 /**
@@ -225,8 +227,12 @@ private:
                              double radius_mm);
     /// Refine \a pose by matching and fitting until the matches settle; false when fewer than
     /// \a minMatches match, the residual is too large or the matches lie on one line.
+    /// With \a rememberRefusals (a search's hypotheses), the first matches of each refusal are
+    /// kept until the next search (the last kRememberedRefusals), and a hypothesis whose first
+    /// matches are one of those is refused without going on.
     bool refine(std::size_t body, RigidTransform& T_rig_from_model, double firstRadius_mm,
-                std::size_t minMatches, Hypothesis& out);
+                std::size_t minMatches, Hypothesis& out, bool rememberRefusals = false);
+    static constexpr std::size_t kRememberedRefusals = 16;
     /// Whether the matched markers of \a body (match_.ofMarker) lie minPoseSpread_mm or more off
     /// the line that fits them best.
     bool spreadOffOneLine(std::size_t body) const;
@@ -309,6 +315,12 @@ private:
         /// Outlier trimming: each pair's leave-one-out RMS (mm), and the pairs by it.
         std::vector<double> leftOutRms;
         std::vector<std::uint32_t> fitOrder;
+        /// refine(): the point of each marker after the first matching, and the last such sets
+        /// that the current search refused (kRememberedRefusals of markerCount each, a ring).
+        std::vector<std::int32_t> firstMatches;
+        std::vector<std::int32_t> refused;
+        std::size_t refusedCount = 0;
+        std::size_t refusedNext = 0;
     } match_;
     std::uint64_t frameChecks_ = 0;
 };
