@@ -278,6 +278,40 @@ TEST(ModelTracker, BoundsTheWorkOfAFloodOfSpuriousPoints) {
     expectPose(roomy.bodies()[0], truth, 1e-6);
 }
 
+// A body whose points all lie about half a millimetre off its layout is matched whole by nearly
+// every 4-clique of a search and refused by the RMS gate each time; the search refuses the
+// cliques that match as a refused one without refitting (everything after the first matching
+// follows from those matches). The same points under a wider gate are found.
+TEST(ModelTracker, RefusesAtOnceCliquesThatMatchAsARefusedOne) {
+    const std::vector<Vec3> layout = test::irregularLayout(12, 23, 12.0);
+    const MarkerModel model = completeModel(layout, 0, 4);
+    const RigidTransform truth = pose(0.6, {1, -1, 2}, {10.0, 5.0, 580.0});
+    std::mt19937 random(5);
+    std::normal_distribution<double> off(0.0, 0.5);
+    std::vector<Vec3> points;
+    place(layout, truth, all, points);
+    for (Vec3& p : points)
+        p += Vec3(off(random), off(random), off(random));
+
+    ModelTrackingConfig tight;
+    tight.maxRms_mm = 0.3;
+    ModelTracker tracker(std::span(&model, 1), tight);
+    tracker.update(0.0, points);
+    EXPECT_FALSE(tracker.bodies()[0].found());
+    const ModelTrackingCounters& c = tracker.counters();
+    EXPECT_GT(c.repeatedRefusals, 0u);
+    EXPECT_LT(c.repeatedRefusals, c.hypotheses);
+
+    ModelTrackingConfig wide;
+    wide.maxRms_mm = 1.5;
+    wide.rmsGateFloor_mm = 1.5;
+    ModelTracker lenient(std::span(&model, 1), wide);
+    lenient.update(0.0, points);
+    ASSERT_TRUE(lenient.bodies()[0].found());
+    EXPECT_EQ(lenient.bodies()[0].markers, 12u);
+    EXPECT_EQ(lenient.counters().repeatedRefusals, 0u);
+}
+
 TEST(ModelTracker, CountsPointsBeyondCapacity) {
     const std::vector<Vec3> layout = test::irregularLayout(6, 71, 12.0);
     const MarkerModel model = completeModel(layout, 0, 4);
