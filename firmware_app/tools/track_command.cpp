@@ -110,11 +110,11 @@ Status runTrack(const TrackOptions& options, std::ostream& summary, std::ostream
     }
     const ModelTrackingCounters& c = tracker.counters();
     summary << "  searches " << c.searches << " (found " << c.searchHits << "), predictions failed "
-            << c.predictionFailures << ", hypotheses " << c.hypotheses << "; refused: points "
-            << c.pointOverflow << ", candidates " << c.candidateOverflow
-            << ", frames out of search budget " << c.budgetExhausted << " (searches skipped "
-            << c.searchesSkipped << "), poses from markers on one line " << c.degeneratePoses
-            << "\n";
+            << c.predictionFailures << ", hypotheses " << c.hypotheses << " (" << c.repeatedRefusals
+            << " refused as a repeat); refused: points " << c.pointOverflow << ", candidates "
+            << c.candidateOverflow << ", frames out of search budget " << c.budgetExhausted
+            << " (searches skipped " << c.searchesSkipped << "), poses from markers on one line "
+            << c.degeneratePoses << "\n";
     return Ok{};
 }
 
