@@ -424,16 +424,16 @@ std::size_t ModelTracker::trimOutliers(std::size_t body, RigidTransform& T_rig_f
             // own fit exists (it is not collinear) and betters the current one is the suspect,
             // as with a fit of each.
             const std::span<std::uint32_t> order = std::span(match_.fitOrder).first(pairs);
-            const std::span<const std::uint32_t> markerOf =
-                std::span(match_.fitMarker).first(pairs);
             std::iota(order.begin(), order.end(), 0U);
             std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
                 return leftOutRms[x] < leftOutRms[y] || (leftOutRms[x] == leftOutRms[y] && x < y);
             });
-            for (const std::uint32_t pair : order) {
-                if (!(leftOutRms[pair] < rms_mm))
-                    break;
-                const std::size_t left = markerOf[pair];
+            // The candidates that could better the current fit, as markers, before any refit:
+            // fitMatches() gathers the pairs again without the one left out, which renumbers them.
+            std::size_t candidates = 0;
+            for (; candidates < pairs && leftOutRms[order[candidates]] < rms_mm; ++candidates)
+                order[candidates] = match_.fitMarker[order[candidates]];
+            for (const std::uint32_t left : order.first(candidates)) {
                 const std::optional<RigidFit> fit = fitMatches(body, left);
                 if (fit && fit->rms_mm < bestRms) {
                     bestRms = fit->rms_mm;
