@@ -21,6 +21,22 @@ constexpr std::size_t kRegistrationCandidates = 20000;
 /// about their long side too loosely held to place a layout by.
 constexpr double kMinTriangleHeight_mm = 8.0;
 
+/// The indices 0 .. \a count - 1 ordered by their key (stably) into \a order, and where each key's
+/// run starts into \a start (\a keys + 1 entries, the last \a count); every key below \a keys.
+template <typename KeyOf>
+void countingSort(std::size_t count, std::size_t keys, KeyOf keyOf,
+                  std::vector<std::uint32_t>& start, std::vector<std::uint32_t>& order) {
+    start.assign(keys + 1, 0);
+    for (std::size_t i = 0; i < count; ++i)
+        ++start[keyOf(i) + 1];
+    for (std::size_t k = 0; k < keys; ++k)
+        start[k + 1] += start[k];
+    order.resize(count);
+    std::vector<std::uint32_t> next(start.begin(), start.end() - 1);
+    for (std::size_t i = 0; i < count; ++i)
+        order[next[keyOf(i)]++] = static_cast<std::uint32_t>(i);
+}
+
 } // namespace
 
 Extent extentOf(std::span<const Vec3> markers_mm) {
@@ -269,30 +285,19 @@ void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm) {
     if (triangles.size() < 2 || !(tolerance_mm > 0.0))
         return;
     const double perBin = 1.0 / tolerance_mm;
-    auto binOf = [&](double side_mm) {
-        const double bin = side_mm * perBin;
-        return bin > 0.0 ? static_cast<std::size_t>(bin) : std::size_t{0};
-    };
     std::size_t bins = 0;
     for (const SortedTriangle& t : triangles)
-        bins = std::max(bins, binOf(t.sides_mm[2]) + 1);
+        bins = std::max(bins, sideBin(t.sides_mm[2], perBin) + 1);
     // Cells of (longest, middle) bins, with a margin of one on each side so that every
     // neighbour of a cell exists; the triangles' indices counting-sorted by cell.
     const std::size_t row = bins + 2;
     auto cellOf = [&](const SortedTriangle& t) {
-        return (binOf(t.sides_mm[2]) + 1) * row + binOf(t.sides_mm[1]) + 1;
+        return (sideBin(t.sides_mm[2], perBin) + 1) * row + sideBin(t.sides_mm[1], perBin) + 1;
     };
-    std::vector<std::uint32_t> cellStart(row * row + 1, 0);
-    for (const SortedTriangle& t : triangles)
-        ++cellStart[cellOf(t) + 1];
-    for (std::size_t c = 0; c + 1 < cellStart.size(); ++c)
-        cellStart[c + 1] += cellStart[c];
-    std::vector<std::uint32_t> inCell(triangles.size());
-    {
-        std::vector<std::uint32_t> next(cellStart.begin(), cellStart.end() - 1);
-        for (std::size_t i = 0; i < triangles.size(); ++i)
-            inCell[next[cellOf(triangles[i])]++] = static_cast<std::uint32_t>(i);
-    }
+    std::vector<std::uint32_t> cellStart, inCell;
+    countingSort(
+        triangles.size(), row * row, [&](std::size_t i) { return cellOf(triangles[i]); }, cellStart,
+        inCell);
     for (std::size_t i = 0; i < triangles.size(); ++i) {
         SortedTriangle& t = triangles[i];
         const std::size_t cell = cellOf(t);
@@ -305,24 +310,19 @@ void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm) {
 
 TrianglesByLongestSide::TrianglesByLongestSide(std::span<const SortedTriangle> triangles,
                                                double binWidth_mm, CellMap map)
-    : binWidth_mm_(binWidth_mm > 0.0 ? binWidth_mm : 1.0)
-    , perBin_(1.0 / binWidth_mm_) {
+    : perBin_(1.0 / (binWidth_mm > 0.0 ? binWidth_mm : 1.0)) {
     // Sorted by bin (counting), then within each bin: a layout of 40 markers has ten thousand
     // triangles, and a sort of them all was the larger part of a layout comparison.
     std::size_t bins = 0;
     for (const SortedTriangle& t : triangles)
         bins = std::max(bins, binOf(t.sides_mm[2]) + 1);
-    binStart_.assign(bins + 1, 0);
-    for (const SortedTriangle& t : triangles)
-        ++binStart_[binOf(t.sides_mm[2]) + 1];
-    for (std::size_t b = 0; b < bins; ++b)
-        binStart_[b + 1] += binStart_[b];
-    triangles_.resize(triangles.size());
-    {
-        std::vector<std::uint32_t> next(binStart_.begin(), binStart_.end() - 1);
-        for (const SortedTriangle& t : triangles)
-            triangles_[next[binOf(t.sides_mm[2])]++] = t;
-    }
+    std::vector<std::uint32_t> order;
+    countingSort(
+        triangles.size(), bins, [&](std::size_t i) { return binOf(triangles[i].sides_mm[2]); },
+        binStart_, order);
+    triangles_.reserve(triangles.size());
+    for (const std::uint32_t i : order)
+        triangles_.push_back(triangles[i]);
     for (std::size_t b = 0; b < bins; ++b)
         std::stable_sort(triangles_.begin() + binStart_[b], triangles_.begin() + binStart_[b + 1],
                          shorterLongestSide);

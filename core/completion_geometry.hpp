@@ -160,6 +160,13 @@ inline bool shorterLongestSide(const SortedTriangle& a, const SortedTriangle& b)
     return a.sides_mm[2] < b.sides_mm[2];
 }
 
+/// The bin of a side of \a side_mm when \a perBin bins make a millimetre (bin 0 for a side of
+/// zero or less): sides within a bin's width of each other lie in one bin or in two side by side.
+inline std::size_t sideBin(double side_mm, double perBin) {
+    const double bin = side_mm * perBin;
+    return bin > 0.0 ? static_cast<std::size_t>(bin) : 0;
+}
+
 /// Sets SortedTriangle::unique to false on each of \a triangles that another of them is congruent
 /// to within \a tolerance_mm. Looks only among triangles whose longest and middle sides lie in
 /// the same or neighbouring bins of that width: a scan by longest side alone compared each of
@@ -179,17 +186,13 @@ public:
     /// Whether mayHoldNear() is wanted: its map takes (longest side / bin width)^2 bytes.
     enum class CellMap { None, Built };
 
-    TrianglesByLongestSide() = default;
     /// Orders \a triangles by longest side, stably (those of equal sides keep their order).
     TrianglesByLongestSide(std::span<const SortedTriangle> triangles, double binWidth_mm,
                            CellMap map = CellMap::Built);
 
     /// The bin of a side of \a side_mm: sides within one bin width of each other lie in the same
     /// bin or in bins side by side.
-    std::size_t binOf(double side_mm) const {
-        const double bin = side_mm * perBin_;
-        return bin > 0.0 ? static_cast<std::size_t>(bin) : 0;
-    }
+    std::size_t binOf(double side_mm) const { return sideBin(side_mm, perBin_); }
 
     /// False only when no triangle's longest and middle sides lie within a bin of the bins
     /// \a longestBin and \a middleBin (so a triangle whose sides lie in those bins is like none
@@ -213,7 +216,6 @@ private:
     /// Per (longest, middle) cell, row by longest, whether a triangle lies in it or a cell beside.
     std::vector<std::uint8_t> nearCell_;
     std::size_t cells_ = 0;
-    double binWidth_mm_ = 1.0;
     double perBin_ = 1.0;
 };
 
