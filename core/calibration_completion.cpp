@@ -35,6 +35,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                                        std::span<const MarkerModel> seeds,
                                        std::span<MarkerModel> out) {
     counters_ = {};
+    precision_.clear();
     bodies_.clear();
     nextBodyId_ = 0;
     sminLayoutOf_.clear();
@@ -116,7 +117,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
     }
     for (Body& body : bodies_)
         if (body.alive)
-            refine(session, body, config_.refineIterations);
+            refine(session, body, config_.refineIterations, true);
 
     const auto minFramesInFour =
         static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
@@ -150,6 +151,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
             if (a < model.markers_model_mm.size() && b < model.markers_model_mm.size())
                 model.edges.push_back(
                     {a, b, (model.markers_model_mm[a] - model.markers_model_mm[b]).norm()});
+        precision_.push_back(body->precision);
         ++count;
     }
     computeSmin(out.first(count), config_.smin);

@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/layout_precision.hpp"
 #include "core/marker_model.hpp"
 #include "core/model_tracker.hpp"
 #include "core/rigid_transform.hpp"
@@ -169,6 +170,8 @@ public:
                     std::span<MarkerModel> out);
 
     const CompletionCounters& counters() const { return counters_; }
+    /// \brief Per model written by the last run() (by id): how closely the session fixed it.
+    std::span<const LayoutPrecision> precision() const { return precision_; }
 
 private:
     /// An object as completion knows it: markers in its own frame (mm) and, per session frame,
@@ -213,6 +216,8 @@ private:
         std::vector<TrackPlace> trackPlaces;
         /// Per marker: frames of the last refine() in which it was found with three others.
         std::vector<std::uint32_t> framesInFour;
+        /// How closely the frames fix its layout, from the final refine().
+        LayoutPrecision precision;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
         /// least \a frames frames.
         bool seenInFour(std::size_t markers, std::uint32_t frames) const {
@@ -318,8 +323,9 @@ private:
     bool measure(const SessionBuffer& session, Body& body);
     /// \brief Markers refined by least squares over every pose and marker at once (\a iterations
     /// steps), with the poses fitted again, frames whose fit fails unposed, and the edges counted
-    /// anew.
-    void refine(const SessionBuffer& session, Body& body, int iterations);
+    /// anew; with \a withPrecision, body.precision from the last step's normal equations.
+    void refine(const SessionBuffer& session, Body& body, int iterations,
+                bool withPrecision = false);
     /// \brief \a body's markers as refine() would place them, the body itself left as it is.
     std::vector<Vec3> refinedMarkers(const SessionBuffer& session, const Body& body);
     void countEdges(const SessionBuffer& session, Body& body);
@@ -331,6 +337,7 @@ private:
     CompletionConfig config_;
     bool valid_ = false;
     CompletionCounters counters_{};
+    std::vector<LayoutPrecision> precision_;
     std::vector<Body> bodies_;
     /// The alive bodies' models as trackAll() last tracked them (bodies_ order).
     std::vector<MarkerModel> roundModels_;

@@ -11,6 +11,7 @@
 
 #include "core/calibration_completion.hpp"
 #include "core/completion_geometry.hpp"
+#include "core/layout_precision.hpp"
 #include "core/marker_set.hpp"
 #include "core/rigid_fit.hpp"
 
@@ -340,64 +341,6 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
 // ---------------------------------------------------------------------------------------------
 // Least squares over every pose
 
-namespace {
-
-/// Adds one frame's observations to the reduced normal equations of a joint least squares over
-/// poses and markers (the frame's pose eliminated): residual r = R m + t - p, pose perturbed on
-/// the left (rotation, then translation), markers in the body frame.
-void addToReducedSystem(const RigidTransform& T_rig_from_body, std::span<const Vec3> markers_mm,
-                        std::span<const Vec3> points_mm, std::span<const std::size_t> which,
-                        Eigen::MatrixXd& reduced, Eigen::VectorXd& rhs) {
-    if (which.size() < 3)
-        return;
-    const Mat3 rotation = T_rig_from_body.rotationMatrix();
-    Eigen::Matrix<double, 6, 6> hpp = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 1> gp = Eigen::Matrix<double, 6, 1>::Zero();
-    // Per observation: its pose Jacobian (3 x 6) and residual, kept for the second pass.
-    constexpr std::size_t kMaxObservations = MarkerSet::kCapacity;
-    const std::size_t count = std::min(which.size(), kMaxObservations);
-    std::array<Eigen::Matrix<double, 3, 6>, kMaxObservations> jp;
-    std::array<Vec3, kMaxObservations> residual;
-    for (std::size_t i = 0; i < count; ++i) {
-        const Vec3 turned = rotation * markers_mm[i];
-        residual[i] = turned + T_rig_from_body.translation_mm - points_mm[i];
-        Mat3 skew;
-        skew << 0.0, -turned.z(), turned.y(), turned.z(), 0.0, -turned.x(), -turned.y(), turned.x(),
-            0.0;
-        jp[i].leftCols<3>() = -skew;
-        jp[i].rightCols<3>().setIdentity();
-        hpp += jp[i].transpose() * jp[i];
-        gp += jp[i].transpose() * residual[i];
-    }
-    const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> poseBlock(hpp);
-    if (poseBlock.info() != Eigen::Success || !poseBlock.isPositive())
-        return;
-    // H_mm = R^T R = I per observation; H_pm = J_p^T R; g_m = R^T r.
-    const Eigen::Matrix<double, 6, 1> hppInvGp = poseBlock.solve(gp);
-    std::array<Eigen::Matrix<double, 6, 3>, kMaxObservations> hpm;
-    std::array<Eigen::Matrix<double, 6, 3>, kMaxObservations> hppInvHpm;
-    for (std::size_t i = 0; i < count; ++i) {
-        hpm[i] = jp[i].transpose() * rotation;
-        hppInvHpm[i] = poseBlock.solve(hpm[i]);
-    }
-    for (std::size_t i = 0; i < count; ++i) {
-        const auto a = static_cast<Eigen::Index>(3 * which[i]);
-        reduced.block<3, 3>(a, a) += Mat3::Identity();
-        rhs.segment<3>(a) -= rotation.transpose() * residual[i] - hpm[i].transpose() * hppInvGp;
-        // The system is symmetric (H_pp is): each block below the diagonal is one above it,
-        // transposed.
-        reduced.block<3, 3>(a, a) -= hpm[i].transpose() * hppInvHpm[i];
-        for (std::size_t j = i + 1; j < count; ++j) {
-            const auto b = static_cast<Eigen::Index>(3 * which[j]);
-            const Mat3 block = hpm[i].transpose() * hppInvHpm[j];
-            reduced.block<3, 3>(a, b) -= block;
-            reduced.block<3, 3>(b, a) -= block.transpose();
-        }
-    }
-}
-
-} // namespace
-
 std::vector<Vec3> CalibrationCompletion::refinedMarkers(const SessionBuffer& session,
                                                         const Body& body) {
     // What refine() reads; the rest of a body (its lone track, its model) is not copied.
@@ -410,7 +353,8 @@ std::vector<Vec3> CalibrationCompletion::refinedMarkers(const SessionBuffer& ses
     return std::move(refined.markers_mm);
 }
 
-void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int iterations) {
+void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int iterations,
+                                   bool withPrecision) {
     const std::size_t frames = session.frames();
     const std::size_t n = body.markers_mm.size();
     if (n < 3)
@@ -428,6 +372,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     const auto dimension = static_cast<Eigen::Index>(3 * n);
     Eigen::MatrixXd reduced(dimension, dimension);
     Eigen::VectorXd rhs(dimension);
+    double squaredResiduals_mm2 = 0.0;
+    double degreesOfFreedom = 0.0;
     for (int iteration = 0; iteration < iterations; ++iteration) {
         const bool last = iteration + 1 == iterations;
         std::fill(counts.begin(), counts.end(), 0U);
@@ -460,6 +406,9 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
             if (!last)
                 continue;
+            const auto matched = static_cast<double>(which.size());
+            squaredResiduals_mm2 += fit->rms_mm * fit->rms_mm * matched;
+            degreesOfFreedom += 3.0 * matched - 6.0;
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
                     ++together[which[i] * n + which[j]];
@@ -467,6 +416,9 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
                 for (const std::size_t k : which)
                     ++body.framesInFour[k];
         }
+        if (last && withPrecision)
+            body.precision =
+                layoutPrecision(reduced, counts, squaredResiduals_mm2, degreesOfFreedom);
         // Markers no frame saw keep their place; the rest take the joint step. The step cannot
         // move the layout as a whole (poses follow), so that freedom is held by a small damping.
         for (std::size_t k = 0; k < n; ++k)

@@ -57,6 +57,8 @@ public:
 
     /// \brief What the last complete() did, and how many online models it started from.
     const CompletionCounters& completionCounters() const { return completion_.counters(); }
+    /// \brief Per model of the last complete() (by id): how closely the session fixed its layout.
+    std::span<const LayoutPrecision> completionPrecision() const { return completion_.precision(); }
     std::size_t seedsUsed() const { return seedsUsed_; }
 
 private:

@@ -463,6 +463,7 @@ int main(int argc, char** argv) {
     std::size_t count = calibrator.exportModels(models);
     const Report online = evaluate(std::span(models).first(count), layouts, expected);
     CompletionCounters completionCounters;
+    std::vector<LayoutPrecision> precision;
     double completion_s = 0.0;
     if (!onlineOnly) {
         const auto start = std::chrono::steady_clock::now();
@@ -471,6 +472,8 @@ int main(int argc, char** argv) {
         completion_s =
             std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         completionCounters = learning.completionCounters();
+        const std::span<const LayoutPrecision> p = learning.completionPrecision();
+        precision.assign(p.begin(), p.end());
     }
     const Report final = evaluate(std::span(models).first(count), layouts, expected);
     double completeAt = -1.0;
@@ -577,9 +580,15 @@ int main(int argc, char** argv) {
                         static_cast<long long>(tiedGroups));
     }
     for (std::size_t i = 0; i < count; ++i) {
-        std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s\n", i,
+        std::printf("  model %zu: %zu markers, %zu edges, s_min %u%s", i,
                     models[i].markers_model_mm.size(), models[i].edges.size(), models[i].sMin,
                     models[i].sameShapeAs >= 0 ? " (same shape as another)" : "");
+        if (i < precision.size())
+            std::printf(", fixed to %.3f mm RMS (worst marker %.3f, point noise %.3f mm%s)",
+                        precision[i].markerRms_mm, precision[i].worstMarker_mm,
+                        precision[i].pointSigma_mm,
+                        precision[i].looseModes > 0 ? ", loose modes" : "");
+        std::printf("\n");
         if (visibleSets && !final.layoutMarkersOfModel[i].empty()) {
             std::printf("    on object %zu's markers:", final.objectOfModel[i]);
             for (const int m : final.layoutMarkersOfModel[i])
@@ -691,10 +700,20 @@ int main(int argc, char** argv) {
     bool precise = true;
     for (const ObjectReport& o : final.objects)
         if (learnable(o) && o.models > 0 && o.rms_mm > kRightRms_mm) {
-            std::printf("marker RMS above %.1f mm\n", kRightRms_mm);
+            if (precise)
+                std::printf("marker RMS above %.1f mm\n", kRightRms_mm);
             precise = false;
-            break;
         }
+    // Whether the session's frames could have done better: the precision the least squares
+    // predicts for each model of an object above the bound (an estimate that errs by more than
+    // its prediction has a fault; one that errs as predicted is what the data allow).
+    for (std::size_t i = 0; i < count && i < precision.size(); ++i) {
+        const ObjectReport& o = final.objects[final.objectOfModel[i]];
+        if (learnable(o) && o.rms_mm > kRightRms_mm && !final.layoutMarkersOfModel[i].empty())
+            std::printf(
+                "  model %zu of object %zu (RMS %.3f mm) is fixed by the frames to %.3f mm RMS\n",
+                i, final.objectOfModel[i], o.rms_mm, precision[i].markerRms_mm);
+    }
     std::printf("result: %s\n", !anyLearnable ? "not learnable"
                                 : complete(final, allowMissing) && !overflowed && precise
                                     ? "right"
