@@ -40,6 +40,8 @@ void CalibrationFinisher::start(CalibrationSession& session, std::vector<NamedMo
         result.learnt = learnt.size();
         result.seeds = session.seedsUsed();
         result.completion = session.completionCounters();
+        const std::span<const LayoutPrecision> precision = session.completionPrecision();
+        result.precision.assign(precision.begin(), precision.end());
         if (!learnt.empty()) {
             result.merged = mergeLearntModels(known, learnt, maxModels, shape);
             result.saved = store.save(result.merged.models);

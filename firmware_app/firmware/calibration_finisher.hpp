@@ -29,6 +29,9 @@ struct FinishedCalibration {
     /// Online models the completion started from.
     std::size_t seeds = 0;
     CompletionCounters completion{};
+    /// Per learnt model: how closely the session fixed its layout (merged.learntIndex says which
+    /// model of the new set each is).
+    std::vector<LayoutPrecision> precision;
     /// Whether the new set reached flash (only tried when learnt > 0).
     Status saved = Ok{};
     /// Wall time the worker took (s), completion, merge and save.

@@ -305,9 +305,25 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
     std::string text = event + ": " + std::to_string(merge.added) + " new, " +
                        std::to_string(merge.updated) + " updated; " +
                        std::to_string(merge.models.size()) + " models (";
-    for (std::size_t i = 0; i < merge.models.size(); ++i)
+    // And how closely the session fixed each learnt layout: whether waving longer would help.
+    std::string fixedTo;
+    for (std::size_t i = 0; i < merge.models.size(); ++i) {
         text += (i ? ", " : "") + std::to_string(merge.models[i].model.markers_model_mm.size());
+        const int learnt = merge.learntIndex[i];
+        if (learnt < 0 || static_cast<std::size_t>(learnt) >= finished.precision.size())
+            continue;
+        const LayoutPrecision& p = finished.precision[static_cast<std::size_t>(learnt)];
+        char one[48];
+        if (p.looseModes > 0)
+            std::snprintf(one, sizeof one, "body %u not fixed", merge.models[i].model.id);
+        else
+            std::snprintf(one, sizeof one, "body %u to %.3f mm", merge.models[i].model.id,
+                          p.markerRms_mm);
+        fixedTo += (fixedTo.empty() ? "" : ", ") + std::string(one);
+    }
     text += " markers)";
+    if (!fixedTo.empty())
+        text += "; layouts fixed, RMS: " + fixedTo;
     if (merge.fragments > 0)
         text += "; " + std::to_string(merge.fragments) + " fragment" +
                 (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";

@@ -29,6 +29,7 @@ MergedModels mergeLearntModels(std::span<const NamedModel> known,
     };
     MergedModels result;
     result.models = copyOf(known);
+    result.learntIndex.assign(result.models.size(), -1);
     std::vector<bool> replaced(result.models.size(), false);
     for (std::size_t i = 0; i < learnt.size(); ++i) {
         bool fragment = false;
@@ -48,6 +49,7 @@ MergedModels mergeLearntModels(std::span<const NamedModel> known,
         if (match < known.size()) {
             model.id = result.models[match].model.id;
             result.models[match].model = std::move(model);
+            result.learntIndex[match] = static_cast<int>(i);
             replaced[match] = true;
             ++result.updated;
             continue;
@@ -62,6 +64,7 @@ MergedModels mergeLearntModels(std::span<const NamedModel> known,
             ++id;
         model.id = id;
         result.models.push_back({std::move(model), "body " + std::to_string(id)});
+        result.learntIndex.push_back(static_cast<int>(i));
         ++result.added;
     }
     // S_min holds against the whole set, the models kept from before included.

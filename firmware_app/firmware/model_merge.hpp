@@ -13,6 +13,8 @@ namespace edgetrack::app {
 /// \brief The new model set and what happened to each learnt model.
 struct MergedModels {
     std::vector<NamedModel> models;
+    /// Per model: the index of the learnt model it is, or -1 for a known model kept as it was.
+    std::vector<int> learntIndex;
     std::size_t added = 0;
     std::size_t updated = 0;
     /// Learnt models whose layout is part of a body with more than twice their markers.

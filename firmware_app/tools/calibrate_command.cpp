@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <string>
 #include <vector>
 
 #include "core/calibration_session.hpp"
@@ -15,6 +16,21 @@ namespace edgetrack::app {
 namespace fs = std::filesystem;
 
 namespace {
+
+/// How closely the session fixed a learnt layout, for the summary.
+std::string precisionText(const LayoutPrecision& p) {
+    char text[160];
+    if (p.looseModes > 0)
+        std::snprintf(text, sizeof text,
+                      "layout not fixed by the frames (%u loose): show the sides that share only "
+                      "two markers together",
+                      p.looseModes);
+    else
+        std::snprintf(text, sizeof text,
+                      "layout fixed to %.3f mm RMS (worst marker %.3f mm, point noise %.3f mm)",
+                      p.markerRms_mm, p.worstMarker_mm, p.pointSigma_mm);
+    return text;
+}
 
 void printProgress(std::ostream& progress, std::size_t frame, double time_s,
                    const ObjectCalibrator& calibrator, std::vector<CalibrationObjectView>& views) {
@@ -87,10 +103,14 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << read->points << " markers; " << count << (count == 1 ? " model" : " models")
             << " written to " << options.out.string() << "\n";
     summary << "  settings: " << options.settings.source << "\n";
-    for (const NamedModel& named : merged.models) {
-        const MarkerModel& model = named.model;
+    const std::span<const LayoutPrecision> precision = session.completionPrecision();
+    for (std::size_t i = 0; i < merged.models.size(); ++i) {
+        const MarkerModel& model = merged.models[i].model;
         summary << "  body_" << model.id << ".json: " << model.markers_model_mm.size()
                 << " markers, " << model.edges.size() << " edges, s_min " << model.sMin;
+        if (const int learnt = merged.learntIndex[i];
+            learnt >= 0 && static_cast<std::size_t>(learnt) < precision.size())
+            summary << "; " << precisionText(precision[static_cast<std::size_t>(learnt)]);
         if (model.sameShapeAs >= 0)
             summary << " (same layout as body_" << model.sameShapeAs
                     << ": told apart only by tracking them continuously)";

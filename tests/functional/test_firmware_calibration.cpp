@@ -91,6 +91,9 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
     std::cout << "[          ] " << firmware.lastEvent() << "\n";
     EXPECT_NE(firmware.lastEvent().find("2 new, 0 updated; 2 models ("), std::string::npos)
         << firmware.lastEvent();
+    // How closely the session fixed each layout, under 0.1 mm for cubes seen for 11 s.
+    EXPECT_NE(firmware.lastEvent().find("layouts fixed, RMS: body 0 to 0.0"), std::string::npos)
+        << firmware.lastEvent();
     EXPECT_NE(firmware.lastEvent().find(", saved to flash"), std::string::npos)
         << firmware.lastEvent();
     EXPECT_EQ(firmware.counters().calibrationsSaved, 1u);

@@ -70,6 +70,8 @@ TEST(ModelMerge, ARecalibratedBodyKeepsItsIdAndNameAndOthersStay) {
     EXPECT_EQ(m.models[1].model.markers_model_mm.size(), 24u);
     EXPECT_EQ(m.models[2].model.id, 0u) << "the lowest id not in use";
     EXPECT_EQ(m.models[2].model.markers_model_mm.size(), 6u);
+    // Which learnt model each is, for what the session measured of it.
+    EXPECT_EQ(m.learntIndex, (std::vector<int>{-1, 0, 1}));
 }
 
 TEST(ModelMerge, AFragmentOfALearntOrKnownBodyIsDropped) {
@@ -79,6 +81,7 @@ TEST(ModelMerge, AFragmentOfALearntOrKnownBodyIsDropped) {
     EXPECT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.fragments, 1u);
     EXPECT_EQ(m.models[0].model.markers_model_mm.size(), 30u);
+    EXPECT_EQ(m.learntIndex, (std::vector<int>{0}));
 
     // A glimpse of a known body must not replace the whole body's model.
     std::vector<NamedModel> k;
