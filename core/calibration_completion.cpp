@@ -24,7 +24,8 @@ CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
              config.maxSites > 0 && config.minModelMarkers >= 4 && config.maxRounds > 0 &&
              config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0 &&
              config.triangleTolerance_mm > 0.0 && config.triangleUniqueness >= 2.0 &&
-             config.minTriangleRun >= 2 && config.minModelSeen_s >= 0.0;
+             config.minTriangleRun >= 2 && config.minModelSeen_s >= 0.0 &&
+             config.maxResidualRatio >= 1.0;
     if (!valid_)
         return;
     sites_.reserve(config.maxSites);
@@ -116,8 +117,30 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                 follow(session, body);
     }
     for (Body& body : bodies_)
-        if (body.alive)
+        if (body.alive) {
             refine(session, body, config_.refineIterations, true);
+            if (mergeCrowdedMarkers(body))
+                refine(session, body, config_.refineIterations, true);
+        }
+    // The rig's noise, as the most rigid body shows it: the median over its markers of their
+    // typical squared residual. A marker whose points lie off its body's poses several times
+    // farther did not move with it (a point that rode along, a marker of another object), and
+    // a body all of whose markers do so is no rigid object (markers on skin).
+    double typical_mm2 = std::numeric_limits<double>::infinity();
+    for (Body& body : bodies_) {
+        if (!body.alive)
+            continue;
+        std::vector<double> seen;
+        for (const double r2 : body.markerResidual_mm2)
+            if (r2 > 0.0)
+                seen.push_back(r2);
+        if (seen.size() >= config_.minModelMarkers)
+            typical_mm2 = std::min(typical_mm2, medianOf(seen));
+    }
+    if (std::isfinite(typical_mm2))
+        for (Body& body : bodies_)
+            if (body.alive && dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2))
+                refine(session, body, config_.refineIterations, true);
 
     const auto minFramesInFour =
         static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
@@ -275,6 +298,45 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
     for (std::size_t b = 0; b < alive; ++b)
         if (!bodies_[b].posedByJoin.empty())
             keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
+}
+
+bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
+    std::vector<Vec3> kept;
+    for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
+        if (body.markerResidual_mm2[k] <= config_.maxResidualRatio * typical_mm2)
+            kept.push_back(body.markers_mm[k]);
+    if (kept.size() == body.markers_mm.size())
+        return false;
+    counters_.markersNotRigid += body.markers_mm.size() - kept.size();
+    if (kept.size() < config_.minModelMarkers) {
+        body.alive = false;
+        ++counters_.droppedNotRigid;
+        return false;
+    }
+    body.markers_mm = std::move(kept);
+    return true;
+}
+
+bool CalibrationCompletion::mergeCrowdedMarkers(Body& body) {
+    const std::size_t n = body.markers_mm.size();
+    const double spacing2 = config_.minMarkerSpacing_mm * config_.minMarkerSpacing_mm;
+    std::vector<bool> drop(n, false);
+    for (std::size_t a = 0; a < n; ++a)
+        for (std::size_t b = a + 1; b < n; ++b) {
+            if (drop[a] || drop[b] ||
+                (body.markers_mm[a] - body.markers_mm[b]).squaredNorm() >= spacing2)
+                continue;
+            drop[body.markerFrames[a] >= body.markerFrames[b] ? b : a] = true;
+        }
+    if (std::none_of(drop.begin(), drop.end(), [](bool d) { return d; }))
+        return false;
+    std::vector<Vec3> kept;
+    for (std::size_t k = 0; k < n; ++k)
+        if (!drop[k])
+            kept.push_back(body.markers_mm[k]);
+    counters_.markersRemoved += n - kept.size();
+    body.markers_mm = std::move(kept);
+    return true;
 }
 
 void CalibrationCompletion::keepJoinedPosesThatStillFit(const SessionBuffer& session, Body& body,

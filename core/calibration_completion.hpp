@@ -74,6 +74,10 @@ struct CompletionConfig {
     double minMarkerSpacing_mm = 4.0;
     /// Rounds of pose fits and a joint least-squares marker step at the end.
     int refineIterations = 4;
+    /// A marker whose typical squared residual (the median over its frames) is more than this
+    /// times the rig's (that of the most rigid body's markers) did not move with its body and
+    /// is dropped: 4 is twice the RMS, far beyond the scatter of a median over 30 frames or more.
+    double maxResidualRatio = 4.0;
     /// A model has at least this many markers.
     std::size_t minModelMarkers = 4;
     /// ...of which at least minModelMarkers were each seen, with three others of it, this long
@@ -82,6 +86,10 @@ struct CompletionConfig {
     double minModelSeen_s = 1.0;
     /// Where the cameras are, rig frame (mm): markers are seen from here.
     Vec3 viewpoint_rig_mm = Vec3::Zero();
+    /// The points come from one stereo rig at viewpoint_rig_mm, whose error grows with the
+    /// square of the distance (residuals are compared in units of it); false for points from a
+    /// multi-camera system around a room (a C3D file), whose error does not depend on where.
+    bool noiseGrowsWithDistance = true;
     SminConfig smin{};
 
     static ModelTrackingConfig defaultTracking() {
@@ -129,6 +137,10 @@ struct CompletionCounters {
     /// Markers found beyond the seeds', and seed markers not confirmed.
     std::uint64_t markersAdded = 0;
     std::uint64_t markersRemoved = 0;
+    /// Markers dropped at the end because their points did not move with their body (see
+    /// maxResidualRatio), and objects left with too few markers by it: not rigid.
+    std::uint64_t markersNotRigid = 0;
+    std::uint64_t droppedNotRigid = 0;
     /// Refused for lack of room: places, models, markers of a model.
     std::uint64_t siteOverflow = 0;
     std::uint64_t modelOverflow = 0;
@@ -218,6 +230,13 @@ private:
         std::vector<std::uint32_t> framesInFour;
         /// How closely the frames fix its layout, from the final refine().
         LayoutPrecision precision;
+        /// Per marker: the median of its squared residuals over the last refine() pass (mm^2),
+        /// each scaled up by the share the fit took of it and down by (d / 1 m)^4 at d from the
+        /// cameras (the growth of a stereo point's variance with distance; see
+        /// CompletionConfig::noiseGrowsWithDistance); 0 when no frame matched it.
+        std::vector<double> markerResidual_mm2;
+        /// Per marker: the frames of the last refine() pass that matched it.
+        std::vector<std::uint32_t> markerFrames;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
         /// least \a frames frames.
         bool seenInFour(std::size_t markers, std::uint32_t frames) const {
@@ -250,6 +269,12 @@ private:
                            std::vector<Vec3>& out) const;
     /// \brief Every alive body tracked together (bodies_ sorted alive first, largest first).
     void trackAll(const SessionBuffer& session);
+    /// \brief Drop the markers whose points fit the body's poses far worse than its other
+    /// markers' (refine() measured them): they did not move with it. Whether any was dropped.
+    bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
+    /// \brief Of two markers closer than minMarkerSpacing_mm, keep the one more frames matched:
+    /// two markers that close are one blob to the cameras. Whether any was dropped.
+    bool mergeCrowdedMarkers(Body& body);
     /// \brief Poses that \a body took from a piece joined to it (Body::posedByJoin, \a was) and
     /// the tracker did not find again, kept where its markers still fit the points: a body joined
     /// from pieces may need more markers to be found afresh than a piece of it shows.

@@ -25,6 +25,8 @@ constexpr double kDegree = std::numbers::pi / 180.0;
 /// Steps of the joint least squares that place the layouts for the join (refinedMarkers()): one
 /// joined the same pieces as four in every sweep, at a quarter of the cost.
 constexpr int kJoinRefineIterations = 1;
+/// Squared distance from the cameras (mm^2) at which markerResidual_mm2 is in the rig's units.
+constexpr double kNoiseDistance2_mm2 = 1000.0 * 1000.0;
 /// A place holds points within this many times the median distance of an object's points from
 /// its markers: for a 3D normal scatter the median distance is 1.5 sigma, so 3 times it holds all
 /// but one point in a thousand.
@@ -364,6 +366,13 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     std::vector<std::uint32_t> counts(n);
     std::vector<std::uint32_t> together(n * n, 0);
     body.framesInFour.assign(n, 0);
+    std::vector<std::vector<double>> residuals(n);
+    struct Claim {
+        const Vec3* point;
+        std::size_t marker;
+        double distance2_mm2;
+    };
+    std::vector<Claim> claims;
     std::vector<Vec3> from, to;
     std::vector<std::size_t> which;
     // The normal equations of all poses and markers at once, poses eliminated (Schur complement):
@@ -386,14 +395,25 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             from.clear();
             to.clear();
             which.clear();
+            claims.clear();
             for (std::size_t k = 0; k < n; ++k) {
                 const Vec3 there = body.T_rig_from_body[f].apply(body.markers_mm[k]);
-                const Vec3* match = nearestPoint(points, there, radius);
-                if (match) {
-                    from.push_back(body.markers_mm[k]);
-                    to.push_back(*match);
-                    which.push_back(k);
-                }
+                if (const Vec3* match = nearestPoint(points, there, radius))
+                    claims.push_back({match, k, (*match - there).squaredNorm()});
+            }
+            // One point is one marker: of two markers that claim it, the nearer has it.
+            for (const Claim& c : claims) {
+                const bool nearerClaim =
+                    std::any_of(claims.begin(), claims.end(), [&](const Claim& o) {
+                        return o.point == c.point &&
+                               (o.distance2_mm2 < c.distance2_mm2 ||
+                                (o.distance2_mm2 == c.distance2_mm2 && o.marker < c.marker));
+                    });
+                if (nearerClaim)
+                    continue;
+                from.push_back(body.markers_mm[c.marker]);
+                to.push_back(*c.point);
+                which.push_back(c.marker);
             }
             const std::optional<RigidFit> fit = fitRigid(from, to);
             if (!fit || fit->rms_mm > config_.tracking.maxRms_mm) {
@@ -409,6 +429,18 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             const auto matched = static_cast<double>(which.size());
             squaredResiduals_mm2 += fit->rms_mm * fit->rms_mm * matched;
             degreesOfFreedom += 3.0 * matched - 6.0;
+            // Each marker's share: a rigid fit of k points takes up 6 of their 3k residual
+            // degrees of freedom, 2/k of each point's on average. And in units of the rig's
+            // noise where the point is: a stereo point's error along the line of sight, which
+            // dominates, grows with the square of its distance from the cameras.
+            for (std::size_t i = 0; i < which.size(); ++i) {
+                const double r2 = (fit->transform.apply(from[i]) - to[i]).squaredNorm();
+                const double distance2 =
+                    config_.noiseGrowsWithDistance
+                        ? (to[i] - config_.viewpoint_rig_mm).squaredNorm() / kNoiseDistance2_mm2
+                        : 1.0;
+                residuals[which[i]].push_back(r2 / (1.0 - 2.0 / matched) / (distance2 * distance2));
+            }
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
                     ++together[which[i] * n + which[j]];
@@ -434,6 +466,13 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             for (std::size_t k = 0; k < n; ++k)
                 body.markers_mm[k] += step.segment<3>(static_cast<Eigen::Index>(3 * k));
     }
+    // A marker's typical squared residual: the median, which a few frames that matched it to
+    // a wrong point do not move.
+    body.markerFrames = counts;
+    body.markerResidual_mm2.assign(n, 0.0);
+    for (std::size_t k = 0; k < n; ++k)
+        if (!residuals[k].empty())
+            body.markerResidual_mm2[k] = medianOf(residuals[k]);
     body.edges.clear();
     for (std::size_t i = 0; i < n; ++i)
         for (std::size_t j = i + 1; j < n; ++j)

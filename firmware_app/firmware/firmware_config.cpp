@@ -252,6 +252,8 @@ CompletionConfig completionFor(const FirmwareConfig& config, const StereoRig* ri
     if (rig != nullptr)
         c.viewpoint_rig_mm =
             0.5 * (rig->camera(0).centre_rig_mm() + rig->camera(1).centre_rig_mm());
+    // Points without a stereo rig (a C3D file) come from cameras all around a room.
+    c.noiseGrowsWithDistance = rig != nullptr;
     return c;
 }
 

@@ -132,8 +132,10 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << k.framesFollowed << " frames followed, " << k.framesFromTriangles
             << " posed from three markers, " << k.dropped << " dropped, " << k.droppedSeenBriefly
             << " seen too briefly; markers added " << k.markersAdded << ", removed "
-            << k.markersRemoved << "; refused: places " << k.siteOverflow << ", models "
-            << k.modelOverflow << ", markers " << k.markerOverflow << "\n";
+            << k.markersRemoved << "; not rigid with their body: " << k.markersNotRigid
+            << " markers, " << k.droppedNotRigid << " whole bodies; refused: places "
+            << k.siteOverflow << ", models " << k.modelOverflow << ", markers " << k.markerOverflow
+            << "\n";
     return Ok{};
 }
 

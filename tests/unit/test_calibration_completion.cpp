@@ -721,6 +721,101 @@ TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.05);
 }
 
+// A session of a rigid body (0.1 mm of point noise) and of \a wobbly markers (body frame, mm)
+// carried by a second pose but each wobbling by \a wobble_mm about its place, as markers on skin
+// or on a flexible strap do; the first \a onRigid of them ride on the rigid body instead.
+SessionBuffer sessionWithWobble(const std::vector<Vec3>& rigid, const std::vector<Vec3>& wobbly,
+                                std::size_t onRigid, double wobble_mm) {
+    const std::size_t frames = 2000;
+    SessionBuffer session(frames, frames * 32);
+    std::mt19937 random(7);
+    std::normal_distribution<double> noise(0.0, 0.1);
+    std::normal_distribution<double> wobble(0.0, wobble_mm);
+    std::vector<Vec3> points;
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        const RigidTransform pose = turning(t, Vec3(-60.0, 0.0, 600.0), 0.0);
+        const RigidTransform other = turning(t, Vec3(60.0, 0.0, 600.0), 1.3, Vec3::UnitX());
+        points.clear();
+        for (const Vec3& m : rigid)
+            points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
+        for (std::size_t k = 0; k < wobbly.size(); ++k)
+            points.push_back((k < onRigid ? pose : other).apply(wobbly[k]) +
+                             Vec3(wobble(random), wobble(random), wobble(random)));
+        session.append(t, points);
+    }
+    return session;
+}
+
+// A marker on a flexible tab of the object wobbles by 0.6 mm about its place: close enough to
+// be learnt as a place of the body, but its points lie off the body's poses about six times
+// farther than the other markers' (a rider, or a marker of another object held against it, does
+// so too). It is left out, and the rest of the layout is not pulled by it.
+TEST(CalibrationCompletion, LeavesOutAMarkerThatDoesNotMoveWithTheBody) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
+    const SessionBuffer session = sessionWithWobble(body, {Vec3(55.0, 10.0, -5.0)}, 1, 0.6);
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({body}), out), 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), body.size());
+    EXPECT_LT(layoutError_mm(out[0], body), 0.05);
+    EXPECT_EQ(completion.counters().markersNotRigid, 1U);
+}
+
+// Markers on skin keep their distances only within a millimetre or two, and a group of them is
+// learnt as a body when the edge tolerance allows it; beside a rigid object in the same session,
+// their points lie off any pose of theirs several times farther than the object's do: no rigid
+// object, no model (the person carrying the Vicon box: 6 such bodies dropped, the box kept).
+TEST(CalibrationCompletion, DropsABodyOfMarkersOnSkinBesideARigidOne) {
+    const std::vector<Vec3> box = test::irregularLayout(8, 3, 15.0);
+    const std::vector<Vec3> skin = test::irregularLayout(6, 5, 20.0);
+    const SessionBuffer session = sessionWithWobble(box, skin, 0, 0.5);
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({box, skin}), out), 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), box.size());
+    EXPECT_EQ(completion.counters().droppedNotRigid, 1U);
+}
+
+// A stereo rig measures a point at 1 m four times as coarsely as one at 0.5 m (its error along
+// the line of sight grows with the square of the distance). Two rigid objects, one near and one
+// far, each fit their poses as well as the rig allows where they are: both are rigid, and both
+// are learnt whole; judged by the near one's residuals alone, the far one would be dropped.
+TEST(CalibrationCompletion, JudgesAFarObjectByTheRigsNoiseWhereItIs) {
+    const std::vector<Vec3> nearBody = test::irregularLayout(8, 3, 15.0);
+    const std::vector<Vec3> farBody = test::irregularLayout(8, 5, 15.0);
+    const std::size_t frames = 2000;
+    SessionBuffer session(frames, frames * 32);
+    std::mt19937 random(9);
+    std::normal_distribution<double> unit(0.0, 1.0);
+    std::vector<Vec3> points;
+    const auto observe = [&](const RigidTransform& pose, const std::vector<Vec3>& layout) {
+        for (const Vec3& m : layout) {
+            const Vec3 p = pose.apply(m);
+            const double sigma_mm = 0.05 * p.squaredNorm() / (500.0 * 500.0);
+            points.push_back(p + sigma_mm * Vec3(unit(random), unit(random), unit(random)));
+        }
+    };
+    for (std::size_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 100.0;
+        points.clear();
+        observe(turning(t, Vec3(-60.0, 0.0, 500.0), 0.0), nearBody);
+        observe(turning(t, Vec3(60.0, 0.0, 1000.0), 1.3, Vec3::UnitX()), farBody);
+        session.append(t, points);
+    }
+    CompletionConfig config;
+    ASSERT_TRUE(config.noiseGrowsWithDistance);
+    ASSERT_EQ(config.viewpoint_rig_mm, Vec3::Zero());
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({nearBody, farBody}), out), 2U);
+    EXPECT_EQ(completion.counters().markersNotRigid, 0U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), 8U);
+    EXPECT_EQ(out[1].markers_model_mm.size(), 8U);
+}
+
 // A glint that stands still in the rig (a screw head, a watch) sits at one place of the body's
 // frame for the 0.6 s the body is held still, and the body is never seen from there again in the
 // session: by time and by the share of frames that look at it, it would be a marker. It is none:
