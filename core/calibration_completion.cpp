@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdlib>
 #include <numbers>
 #include <numeric>
 #include <optional>
@@ -12,7 +13,6 @@
 #include "core/completion_geometry.hpp"
 #include "core/marker_set.hpp"
 #include "core/rigid_fit.hpp"
-
 namespace edgetrack {
 
 using namespace completion_detail;
@@ -25,7 +25,7 @@ CalibrationCompletion::CalibrationCompletion(const CompletionConfig& config)
              config.minSeenShare >= 0.0 && config.minSeenShare <= 1.0 &&
              config.triangleTolerance_mm > 0.0 && config.triangleUniqueness >= 2.0 &&
              config.minTriangleRun >= 2 && config.minModelSeen_s >= 0.0 &&
-             config.maxResidualRatio >= 1.0;
+             config.maxResidualRatio >= 1.0 && config.maxFrameResidualRatio >= 1.0;
     if (!valid_)
         return;
     sites_.reserve(config.maxSites);
@@ -137,10 +137,18 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         if (seen.size() >= config_.minModelMarkers)
             typical_mm2 = std::min(typical_mm2, medianOf(seen));
     }
-    if (std::isfinite(typical_mm2))
+    if (std::isfinite(typical_mm2)) {
+        // Then the layout from the frames that fit as well as the rig measures: a frame posed
+        // wrongly (a near-likeness of the layout taken for it, a piece's pose kept through a
+        // join) pulls the layout by as much as it is off.
         for (Body& body : bodies_)
-            if (body.alive && dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2))
-                refine(session, body, config_.refineIterations, true);
+            if (body.alive) {
+                dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
+                if (body.alive)
+                    refine(session, body, config_.refineIterations, true,
+                           config_.maxFrameResidualRatio * typical_mm2);
+            }
+    }
 
     const auto minFramesInFour =
         static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
@@ -300,21 +308,20 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
 }
 
-bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
+void CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
     std::vector<Vec3> kept;
     for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
         if (body.markerResidual_mm2[k] <= config_.maxResidualRatio * typical_mm2)
             kept.push_back(body.markers_mm[k]);
     if (kept.size() == body.markers_mm.size())
-        return false;
+        return;
     counters_.markersNotRigid += body.markers_mm.size() - kept.size();
     if (kept.size() < config_.minModelMarkers) {
         body.alive = false;
         ++counters_.droppedNotRigid;
-        return false;
+        return;
     }
     body.markers_mm = std::move(kept);
-    return true;
 }
 
 bool CalibrationCompletion::mergeCrowdedMarkers(Body& body) {

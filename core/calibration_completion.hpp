@@ -78,6 +78,9 @@ struct CompletionConfig {
     /// times the rig's (that of the most rigid body's markers) did not move with its body and
     /// is dropped: 4 is twice the RMS, far beyond the scatter of a median over 30 frames or more.
     double maxResidualRatio = 4.0;
+    /// A frame whose points lie off its fit by more than this times the rig's typical squared
+    /// residual on average (3 times the RMS) is left out of the layout's least squares.
+    double maxFrameResidualRatio = 9.0;
     /// A model has at least this many markers.
     std::size_t minModelMarkers = 4;
     /// ...of which at least minModelMarkers were each seen, with three others of it, this long
@@ -269,9 +272,10 @@ private:
                            std::vector<Vec3>& out) const;
     /// \brief Every alive body tracked together (bodies_ sorted alive first, largest first).
     void trackAll(const SessionBuffer& session);
-    /// \brief Drop the markers whose points fit the body's poses far worse than its other
-    /// markers' (refine() measured them): they did not move with it. Whether any was dropped.
-    bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
+    /// \brief Drop the markers whose typical residual (refine() measured it) is more than
+    /// maxResidualRatio times \a typical_mm2, the rig's: they did not move with the body. A body
+    /// left with fewer than minModelMarkers is no longer alive.
+    void dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
     /// \brief Of two markers closer than minMarkerSpacing_mm, keep the one more frames matched:
     /// two markers that close are one blob to the cameras. Whether any was dropped.
     bool mergeCrowdedMarkers(Body& body);
@@ -348,9 +352,11 @@ private:
     bool measure(const SessionBuffer& session, Body& body);
     /// \brief Markers refined by least squares over every pose and marker at once (\a iterations
     /// steps), with the poses fitted again, frames whose fit fails unposed, and the edges counted
-    /// anew; with \a withPrecision, body.precision from the last step's normal equations.
+    /// anew; with \a withPrecision, body.precision from the last step's normal equations. A
+    /// frame whose points lie off its fit by more than \a maxFrameResidual_mm2 on average (in
+    /// the units of Body::markerResidual_mm2; 0: no limit) is unposed too.
     void refine(const SessionBuffer& session, Body& body, int iterations,
-                bool withPrecision = false);
+                bool withPrecision = false, double maxFrameResidual_mm2 = 0.0);
     /// \brief \a body's markers as refine() would place them, the body itself left as it is.
     std::vector<Vec3> refinedMarkers(const SessionBuffer& session, const Body& body);
     void countEdges(const SessionBuffer& session, Body& body);

@@ -356,7 +356,7 @@ std::vector<Vec3> CalibrationCompletion::refinedMarkers(const SessionBuffer& ses
 }
 
 void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int iterations,
-                                   bool withPrecision) {
+                                   bool withPrecision, double maxFrameResidual_mm2) {
     const std::size_t frames = session.frames();
     const std::size_t n = body.markers_mm.size();
     if (n < 3)
@@ -367,6 +367,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     std::vector<std::uint32_t> together(n * n, 0);
     body.framesInFour.assign(n, 0);
     std::vector<std::vector<double>> residuals(n);
+    std::vector<double> scaled;
     struct Claim {
         const Vec3* point;
         std::size_t marker;
@@ -420,27 +421,36 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
                 body.posed[f] = 0;
                 continue;
             }
-            body.T_rig_from_body[f] = fit->transform;
-            for (const std::size_t k : which)
-                ++counts[k];
-            addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
-            if (!last)
-                continue;
-            const auto matched = static_cast<double>(which.size());
-            squaredResiduals_mm2 += fit->rms_mm * fit->rms_mm * matched;
-            degreesOfFreedom += 3.0 * matched - 6.0;
             // Each marker's share: a rigid fit of k points takes up 6 of their 3k residual
             // degrees of freedom, 2/k of each point's on average. And in units of the rig's
             // noise where the point is: a stereo point's error along the line of sight, which
             // dominates, grows with the square of its distance from the cameras.
+            const auto matched = static_cast<double>(which.size());
+            scaled.clear();
+            double frameScaled = 0.0;
             for (std::size_t i = 0; i < which.size(); ++i) {
                 const double r2 = (fit->transform.apply(from[i]) - to[i]).squaredNorm();
                 const double distance2 =
                     config_.noiseGrowsWithDistance
                         ? (to[i] - config_.viewpoint_rig_mm).squaredNorm() / kNoiseDistance2_mm2
                         : 1.0;
-                residuals[which[i]].push_back(r2 / (1.0 - 2.0 / matched) / (distance2 * distance2));
+                scaled.push_back(r2 / (1.0 - 2.0 / matched) / (distance2 * distance2));
+                frameScaled += scaled.back();
             }
+            if (maxFrameResidual_mm2 > 0.0 && frameScaled / matched > maxFrameResidual_mm2) {
+                body.posed[f] = 0;
+                continue;
+            }
+            body.T_rig_from_body[f] = fit->transform;
+            for (const std::size_t k : which)
+                ++counts[k];
+            addToReducedSystem(fit->transform, from, to, which, reduced, rhs);
+            if (!last)
+                continue;
+            squaredResiduals_mm2 += fit->rms_mm * fit->rms_mm * matched;
+            degreesOfFreedom += 3.0 * matched - 6.0;
+            for (std::size_t i = 0; i < which.size(); ++i)
+                residuals[which[i]].push_back(scaled[i]);
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
                     ++together[which[i] * n + which[j]];
