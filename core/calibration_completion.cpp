@@ -141,12 +141,12 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         // Then the layout from the frames that fit as well as the rig measures: a frame posed
         // wrongly (a near-likeness of the layout taken for it, a piece's pose kept through a
         // join) pulls the layout by as much as it is off.
+        const double frameGate_mm2 = config_.maxFrameResidualRatio * typical_mm2;
         for (Body& body : bodies_)
             if (body.alive) {
-                dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
-                if (body.alive)
-                    refine(session, body, config_.refineIterations, true,
-                           config_.maxFrameResidualRatio * typical_mm2);
+                const bool dropped = dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
+                if (body.alive && (dropped || body.worstFrameResidual_mm2 > frameGate_mm2))
+                    refine(session, body, config_.refineIterations, true, frameGate_mm2);
             }
     }
 
@@ -308,20 +308,21 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
 }
 
-void CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
+bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
     std::vector<Vec3> kept;
     for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
         if (body.markerResidual_mm2[k] <= config_.maxResidualRatio * typical_mm2)
             kept.push_back(body.markers_mm[k]);
     if (kept.size() == body.markers_mm.size())
-        return;
+        return false;
     counters_.markersNotRigid += body.markers_mm.size() - kept.size();
     if (kept.size() < config_.minModelMarkers) {
         body.alive = false;
         ++counters_.droppedNotRigid;
-        return;
+        return true;
     }
     body.markers_mm = std::move(kept);
+    return true;
 }
 
 bool CalibrationCompletion::mergeCrowdedMarkers(Body& body) {

@@ -240,6 +240,9 @@ private:
         std::vector<double> markerResidual_mm2;
         /// Per marker: the frames of the last refine() pass that matched it.
         std::vector<std::uint32_t> markerFrames;
+        /// The largest mean over a frame's points of their residuals in that pass, in the units
+        /// of markerResidual_mm2.
+        double worstFrameResidual_mm2 = 0.0;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
         /// least \a frames frames.
         bool seenInFour(std::size_t markers, std::uint32_t frames) const {
@@ -274,8 +277,8 @@ private:
     void trackAll(const SessionBuffer& session);
     /// \brief Drop the markers whose typical residual (refine() measured it) is more than
     /// maxResidualRatio times \a typical_mm2, the rig's: they did not move with the body. A body
-    /// left with fewer than minModelMarkers is no longer alive.
-    void dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
+    /// left with fewer than minModelMarkers is no longer alive. Whether it changed the body.
+    bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
     /// \brief Of two markers closer than minMarkerSpacing_mm, keep the one more frames matched:
     /// two markers that close are one blob to the cameras. Whether any was dropped.
     bool mergeCrowdedMarkers(Body& body);
@@ -352,11 +355,12 @@ private:
     bool measure(const SessionBuffer& session, Body& body);
     /// \brief Markers refined by least squares over every pose and marker at once (\a iterations
     /// steps), with the poses fitted again, frames whose fit fails unposed, and the edges counted
-    /// anew; with \a withPrecision, body.precision from the last step's normal equations. A
-    /// frame whose points lie off its fit by more than \a maxFrameResidual_mm2 on average (in
-    /// the units of Body::markerResidual_mm2; 0: no limit) is unposed too.
-    void refine(const SessionBuffer& session, Body& body, int iterations,
-                bool withPrecision = false, double maxFrameResidual_mm2 = 0.0);
+    /// anew. With \a judge (at the end of completion), the last pass also measures the body's
+    /// precision, each marker's typical residual and the worst frame's (Body), and a frame whose
+    /// points lie off its fit by more than \a maxFrameResidual_mm2 on average (in the units of
+    /// Body::markerResidual_mm2; 0: no limit) is unposed too.
+    void refine(const SessionBuffer& session, Body& body, int iterations, bool judge = false,
+                double maxFrameResidual_mm2 = 0.0);
     /// \brief \a body's markers as refine() would place them, the body itself left as it is.
     std::vector<Vec3> refinedMarkers(const SessionBuffer& session, const Body& body);
     void countEdges(const SessionBuffer& session, Body& body);

@@ -356,7 +356,7 @@ std::vector<Vec3> CalibrationCompletion::refinedMarkers(const SessionBuffer& ses
 }
 
 void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int iterations,
-                                   bool withPrecision, double maxFrameResidual_mm2) {
+                                   bool judge, double maxFrameResidual_mm2) {
     const std::size_t frames = session.frames();
     const std::size_t n = body.markers_mm.size();
     if (n < 3)
@@ -368,6 +368,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     body.framesInFour.assign(n, 0);
     std::vector<std::vector<double>> residuals(n);
     std::vector<double> scaled;
+    body.worstFrameResidual_mm2 = 0.0;
     struct Claim {
         const Vec3* point;
         std::size_t marker;
@@ -428,7 +429,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             const auto matched = static_cast<double>(which.size());
             scaled.clear();
             double frameScaled = 0.0;
-            for (std::size_t i = 0; i < which.size(); ++i) {
+            const bool judged = judge && (last || maxFrameResidual_mm2 > 0.0);
+            for (std::size_t i = 0; judged && i < which.size(); ++i) {
                 const double r2 = (fit->transform.apply(from[i]) - to[i]).squaredNorm();
                 const double distance2 =
                     config_.noiseGrowsWithDistance
@@ -441,6 +443,9 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
                 body.posed[f] = 0;
                 continue;
             }
+            if (last)
+                body.worstFrameResidual_mm2 =
+                    std::max(body.worstFrameResidual_mm2, frameScaled / matched);
             body.T_rig_from_body[f] = fit->transform;
             for (const std::size_t k : which)
                 ++counts[k];
@@ -449,7 +454,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
                 continue;
             squaredResiduals_mm2 += fit->rms_mm * fit->rms_mm * matched;
             degreesOfFreedom += 3.0 * matched - 6.0;
-            for (std::size_t i = 0; i < which.size(); ++i)
+            for (std::size_t i = 0; i < scaled.size(); ++i)
                 residuals[which[i]].push_back(scaled[i]);
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
@@ -458,7 +463,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
                 for (const std::size_t k : which)
                     ++body.framesInFour[k];
         }
-        if (last && withPrecision)
+        if (last && judge)
             body.precision =
                 layoutPrecision(reduced, counts, squaredResiduals_mm2, degreesOfFreedom);
         // Markers no frame saw keep their place; the rest take the joint step. The step cannot
@@ -480,7 +485,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     // a wrong point do not move.
     body.markerFrames = counts;
     body.markerResidual_mm2.assign(n, 0.0);
-    for (std::size_t k = 0; k < n; ++k)
+    for (std::size_t k = 0; k < n && judge; ++k)
         if (!residuals[k].empty())
             body.markerResidual_mm2[k] = medianOf(residuals[k]);
     body.edges.clear();
