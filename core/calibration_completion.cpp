@@ -147,6 +147,8 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                 const bool dropped = dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
                 if (body.alive && (dropped || body.worstFrameResidual_mm2 > frameGate_mm2))
                     refine(session, body, config_.refineIterations, true, frameGate_mm2);
+                if (body.alive && keepTheLargestRigidGroup(body))
+                    refine(session, body, config_.refineIterations, true, frameGate_mm2);
             }
     }
 
@@ -321,6 +323,32 @@ bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, doub
         ++counters_.droppedNotRigid;
         return true;
     }
+    body.markers_mm = std::move(kept);
+    return true;
+}
+
+bool CalibrationCompletion::keepTheLargestRigidGroup(Body& body) {
+
+    if (body.rigidGroups.size() < 2)
+        return false;
+    const auto seenOf = [&](const MarkerBits& group) {
+        std::uint64_t seen = 0;
+        for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
+            if ((group[k / 64] >> (k % 64)) & 1U)
+                seen += body.markerFrames[k];
+        return seen;
+    };
+    const MarkerBits* largest = &body.rigidGroups.front();
+    for (const MarkerBits& group : body.rigidGroups)
+        if (seenOf(group) > seenOf(*largest))
+            largest = &group;
+    std::vector<Vec3> kept;
+    for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
+        if (((*largest)[k / 64] >> (k % 64)) & 1U)
+            kept.push_back(body.markers_mm[k]);
+    if (kept.size() == body.markers_mm.size())
+        return false;
+    counters_.markersNotFixed += body.markers_mm.size() - kept.size();
     body.markers_mm = std::move(kept);
     return true;
 }

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <map>
@@ -144,6 +145,9 @@ struct CompletionCounters {
     /// maxResidualRatio), and objects left with too few markers by it: not rigid.
     std::uint64_t markersNotRigid = 0;
     std::uint64_t droppedNotRigid = 0;
+    /// Markers dropped at the end because no frame fixed them to the rest of their body (see
+    /// rigidGroupsOf: tied by markers on one line at most).
+    std::uint64_t markersNotFixed = 0;
     /// Refused for lack of room: places, models, markers of a model.
     std::uint64_t siteOverflow = 0;
     std::uint64_t modelOverflow = 0;
@@ -243,6 +247,8 @@ private:
         /// The largest mean over a frame's points of their residuals in that pass, in the units
         /// of markerResidual_mm2.
         double worstFrameResidual_mm2 = 0.0;
+        /// Its rigid groups in that pass (completion_detail::rigidGroupsOf).
+        std::vector<std::array<std::uint64_t, 2>> rigidGroups;
         /// \brief Whether at least \a markers of its markers were each seen in four for at
         /// least \a frames frames.
         bool seenInFour(std::size_t markers, std::uint32_t frames) const {
@@ -279,6 +285,10 @@ private:
     /// maxResidualRatio times \a typical_mm2, the rig's: they did not move with the body. A body
     /// left with fewer than minModelMarkers is no longer alive. Whether it changed the body.
     bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
+    /// \brief Keep only the markers of the body's rigid group seen most (refine() found the
+    /// groups): the others are tied to it by markers on one line at most, and their places about
+    /// it are fixed by no frame. Whether any was dropped.
+    bool keepTheLargestRigidGroup(Body& body);
     /// \brief Of two markers closer than minMarkerSpacing_mm, keep the one more frames matched:
     /// two markers that close are one blob to the cameras. Whether any was dropped.
     bool mergeCrowdedMarkers(Body& body);

@@ -25,6 +25,9 @@ constexpr double kDegree = std::numbers::pi / 180.0;
 /// Steps of the joint least squares that place the layouts for the join (refinedMarkers()): one
 /// joined the same pieces as four in every sweep, at a quarter of the cost.
 constexpr int kJoinRefineIterations = 1;
+/// Three or more shared markers tie two rigid groups when they lie this far off one line (mm):
+/// the tracker's minPoseSpread_mm.
+constexpr double kMinGroupSpread_mm = 3.0;
 /// Squared distance from the cameras (mm^2) at which markerResidual_mm2 is in the rig's units.
 constexpr double kNoiseDistance2_mm2 = 1000.0 * 1000.0;
 /// A place holds points within this many times the median distance of an object's points from
@@ -368,6 +371,9 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     body.framesInFour.assign(n, 0);
     std::vector<std::vector<double>> residuals(n);
     std::vector<double> scaled;
+    std::vector<MarkerBits> viewSets;
+    std::size_t previousPosed = SIZE_MAX - 1;
+    MarkerBits previousSeen{};
     body.worstFrameResidual_mm2 = 0.0;
     struct Claim {
         const Vec3* point;
@@ -456,6 +462,21 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             degreesOfFreedom += 3.0 * matched - 6.0;
             for (std::size_t i = 0; i < scaled.size(); ++i)
                 residuals[which[i]].push_back(scaled[i]);
+            if (judge && last) {
+                MarkerBits seen{};
+                for (const std::size_t k : which)
+                    seen[k / 64] |= std::uint64_t{1} << (k % 64);
+                // A handover: the frame before, posed too, carries the pose on by continuity.
+                if (previousPosed + 1 == f) {
+                    MarkerBits joined = previousSeen;
+                    joined[0] |= seen[0];
+                    joined[1] |= seen[1];
+                    viewSets.push_back(joined);
+                } else
+                    viewSets.push_back(seen);
+                previousPosed = f;
+                previousSeen = seen;
+            }
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
                     ++together[which[i] * n + which[j]];
@@ -484,6 +505,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     // A marker's typical squared residual: the median, which a few frames that matched it to
     // a wrong point do not move.
     body.markerFrames = counts;
+    if (judge)
+        body.rigidGroups = rigidGroupsOf(viewSets, body.markers_mm, kMinGroupSpread_mm);
     body.markerResidual_mm2.assign(n, 0.0);
     for (std::size_t k = 0; k < n && judge; ++k)
         if (!residuals[k].empty())

@@ -416,4 +416,61 @@ RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTr
     return out;
 }
 
+namespace {
+
+/// Whether the markers of \a shared lie at least \a minSpread_mm off the line through the two
+/// farthest apart of them.
+bool offOneLine(const MarkerBits& shared, std::span<const Vec3> layout, double minSpread_mm) {
+    std::vector<Vec3> points;
+    for (std::size_t k = 0; k < layout.size(); ++k)
+        if ((shared[k / 64] >> (k % 64)) & 1U)
+            points.push_back(layout[k]);
+    if (points.size() < 3)
+        return false;
+    std::size_t a = 0, b = 1;
+    double widest = -1.0;
+    for (std::size_t i = 0; i < points.size(); ++i)
+        for (std::size_t j = i + 1; j < points.size(); ++j)
+            if (const double d = (points[i] - points[j]).squaredNorm(); d > widest) {
+                widest = d;
+                a = i;
+                b = j;
+            }
+    const Vec3 direction = (points[b] - points[a]).normalized();
+    return std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
+        const Vec3 off = p - points[a];
+        return (off - off.dot(direction) * direction).norm() >= minSpread_mm;
+    });
+}
+
+} // namespace
+
+std::vector<MarkerBits> rigidGroupsOf(std::vector<MarkerBits> views, std::span<const Vec3> layout,
+                                      double minSpread_mm) {
+    std::sort(views.begin(), views.end());
+    views.erase(std::unique(views.begin(), views.end()), views.end());
+    std::vector<MarkerBits> groups;
+    for (const MarkerBits& view : views) {
+        if (!offOneLine(view, layout, minSpread_mm))
+            continue;
+        groups.push_back(view);
+        // Merge the new group with every group that shares three markers off a line with it.
+        bool merged = true;
+        while (merged) {
+            merged = false;
+            MarkerBits& last = groups.back();
+            for (std::size_t g = 0; g + 1 < groups.size(); ++g)
+                if (offOneLine({groups[g][0] & last[0], groups[g][1] & last[1]}, layout,
+                               minSpread_mm)) {
+                    last[0] |= groups[g][0];
+                    last[1] |= groups[g][1];
+                    groups.erase(groups.begin() + static_cast<std::ptrdiff_t>(g));
+                    merged = true;
+                    break;
+                }
+        }
+    }
+    return groups;
+}
+
 } // namespace edgetrack::completion_detail

@@ -280,4 +280,17 @@ inline const Vec3* nearestPoint(std::span<const Vec3> points_mm, const Vec3& the
 RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTransform& at1,
                            double t1_s, double t_s, const Vec3& centre_body);
 
+/// A set of a layout's markers (up to 128), one bit each.
+using MarkerBits = std::array<std::uint64_t, 2>;
+
+/**
+ * \brief The rigid groups of \a layout (body frame, mm) seen in \a views (the markers matched in
+ * each frame): sets of markers seen together, merged while two share three or more markers that
+ * lie at least \a minSpread_mm off one line. A frame fixes the shape of what it shows; two such
+ * shapes that share three markers off a line fix each other; markers of different groups are
+ * tied by markers on one line at most, about which one group may turn against the other.
+ */
+std::vector<MarkerBits> rigidGroupsOf(std::vector<MarkerBits> views, std::span<const Vec3> layout,
+                                      double minSpread_mm);
+
 } // namespace edgetrack::completion_detail

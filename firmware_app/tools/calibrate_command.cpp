@@ -133,9 +133,10 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << " posed from three markers, " << k.dropped << " dropped, " << k.droppedSeenBriefly
             << " seen too briefly; markers added " << k.markersAdded << ", removed "
             << k.markersRemoved << "; not rigid with their body: " << k.markersNotRigid
-            << " markers, " << k.droppedNotRigid << " whole bodies; refused: places "
-            << k.siteOverflow << ", models " << k.modelOverflow << ", markers " << k.markerOverflow
-            << "\n";
+            << " markers, " << k.droppedNotRigid
+            << " whole bodies; not fixed by any frame: " << k.markersNotFixed
+            << " markers; refused: places " << k.siteOverflow << ", models " << k.modelOverflow
+            << ", markers " << k.markerOverflow << "\n";
     return Ok{};
 }
 

@@ -499,7 +499,7 @@ int main(int argc, char** argv) {
                     "%llu and %llu seen "
                     "too briefly, markers "
                     "added %llu and removed "
-                    "%llu, not rigid %llu markers and %llu objects, overflow "
+                    "%llu, not rigid %llu markers and %llu objects, not fixed %llu, overflow "
                     "sites/models/markers %llu/%llu/%llu\n",
                     completion_s, static_cast<unsigned long long>(k.seeds),
                     static_cast<unsigned long long>(k.discovered),
@@ -515,6 +515,7 @@ int main(int argc, char** argv) {
                     static_cast<unsigned long long>(k.markersRemoved),
                     static_cast<unsigned long long>(k.markersNotRigid),
                     static_cast<unsigned long long>(k.droppedNotRigid),
+                    static_cast<unsigned long long>(k.markersNotFixed),
                     static_cast<unsigned long long>(k.siteOverflow),
                     static_cast<unsigned long long>(k.modelOverflow),
                     static_cast<unsigned long long>(k.markerOverflow));
