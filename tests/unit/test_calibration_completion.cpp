@@ -713,17 +713,14 @@ TEST(CalibrationCompletion, KeepsTwoBodiesApartAndDropsWhatNothingShows) {
     EXPECT_EQ(completion.counters().dropped, 1U);
 }
 
-// A point that rides along with the body for a while (a marker of something held against it)
-// sits at one place in the body's frame for 0.6 s; the two times the body is later seen from the
-// same directions, it is not there. It is no marker of the body, although a third of the frames
-// that look at that place from where it was seen do show it.
-TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
-    const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
-    const Vec3 rider_body_mm(55.0, 10.0, -5.0);
-    const std::size_t frames = 2000;
+// \a frames frames of \a body turning in front of the cameras with \a noise_mm of point noise,
+// each frame's points then changed by \a edit(frame, pose, points).
+template <typename Edit>
+SessionBuffer sessionOfOneBody(const std::vector<Vec3>& body, std::size_t frames, double noise_mm,
+                               unsigned seed, Edit edit) {
     SessionBuffer session(frames, frames * 16);
-    std::mt19937 random(4);
-    std::normal_distribution<double> noise(0.0, 0.05);
+    std::mt19937 random(seed);
+    std::normal_distribution<double> noise(0.0, noise_mm);
     std::vector<Vec3> points;
     for (std::size_t f = 0; f < frames; ++f) {
         const double t = static_cast<double>(f) / 100.0;
@@ -731,10 +728,25 @@ TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
         points.clear();
         for (const Vec3& m : body)
             points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
-        if (t >= 1.0 && t < 1.6)
-            points.push_back(pose.apply(rider_body_mm));
+        edit(f, pose, points);
         session.append(t, points);
     }
+    return session;
+}
+
+// A point that rides along with the body for a while (a marker of something held against it)
+// sits at one place in the body's frame for 0.6 s; the two times the body is later seen from the
+// same directions, it is not there. It is no marker of the body, although a third of the frames
+// that look at that place from where it was seen do show it.
+TEST(CalibrationCompletion, LeavesOutAPointThatRodeAlongForAWhile) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
+    const Vec3 rider_body_mm(55.0, 10.0, -5.0);
+    const SessionBuffer session =
+        sessionOfOneBody(body, 2000, 0.05, 4,
+                         [&](std::size_t f, const RigidTransform& pose, std::vector<Vec3>& points) {
+                             if (f >= 100 && f < 160)
+                                 points.push_back(pose.apply(rider_body_mm));
+                         });
     const CompletionConfig config;
     ASSERT_LT(config.minSeen_s, 0.6) << "the rider is seen long enough to be a marker by time";
     CalibrationCompletion completion(config);
@@ -810,22 +822,12 @@ TEST(CalibrationCompletion, DropsABodyOfMarkersOnSkinBesideARigidOne) {
 // than the rig measures, and are left out of the layout.
 TEST(CalibrationCompletion, LeavesFramesThatFitFarWorseThanTheRigOutOfTheLayout) {
     const std::vector<Vec3> body = test::irregularLayout(10, 12, 15.0);
-    const std::size_t frames = 2000;
-    SessionBuffer session(frames, frames * 16);
-    std::mt19937 random(5);
-    std::normal_distribution<double> noise(0.0, 0.05);
-    std::vector<Vec3> points;
-    for (std::size_t f = 0; f < frames; ++f) {
-        const double t = static_cast<double>(f) / 100.0;
-        const RigidTransform pose = turning(t, Vec3(0.0, 0.0, 600.0), 0.0);
-        points.clear();
-        for (const Vec3& m : body)
-            points.push_back(pose.apply(m) + Vec3(noise(random), noise(random), noise(random)));
-        if (f >= 800 && f < 1000)
-            points[0] += Vec3(1.0, 0.0, 0.0);
-        session.append(t, points);
-    }
-    CompletionConfig config;
+    const SessionBuffer session = sessionOfOneBody(
+        body, 2000, 0.05, 5, [](std::size_t f, const RigidTransform&, std::vector<Vec3>& points) {
+            if (f >= 800 && f < 1000)
+                points[0] += Vec3(1.0, 0.0, 0.0);
+        });
+    const CompletionConfig config;
     CalibrationCompletion completion(config);
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, modelsOf({body}), out), 1U);
