@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstdlib>
 #include <numbers>
 #include <numeric>
 #include <optional>
@@ -13,6 +12,7 @@
 #include "core/completion_geometry.hpp"
 #include "core/marker_set.hpp"
 #include "core/rigid_fit.hpp"
+
 namespace edgetrack {
 
 using namespace completion_detail;
@@ -116,41 +116,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
             if (body.alive)
                 follow(session, body);
     }
-    for (Body& body : bodies_)
-        if (body.alive) {
-            refine(session, body, config_.refineIterations, true);
-            if (mergeCrowdedMarkers(body))
-                refine(session, body, config_.refineIterations, true);
-        }
-    // The rig's noise, as the most rigid body shows it: the median over its markers of their
-    // typical squared residual. A marker whose points lie off its body's poses several times
-    // farther did not move with it (a point that rode along, a marker of another object), and
-    // a body all of whose markers do so is no rigid object (markers on skin).
-    double typical_mm2 = std::numeric_limits<double>::infinity();
-    for (Body& body : bodies_) {
-        if (!body.alive)
-            continue;
-        std::vector<double> seen;
-        for (const double r2 : body.markerResidual_mm2)
-            if (r2 > 0.0)
-                seen.push_back(r2);
-        if (seen.size() >= config_.minModelMarkers)
-            typical_mm2 = std::min(typical_mm2, medianOf(seen));
-    }
-    if (std::isfinite(typical_mm2)) {
-        // Then the layout from the frames that fit as well as the rig measures: a frame posed
-        // wrongly (a near-likeness of the layout taken for it, a piece's pose kept through a
-        // join) pulls the layout by as much as it is off.
-        const double frameGate_mm2 = config_.maxFrameResidualRatio * typical_mm2;
-        for (Body& body : bodies_)
-            if (body.alive) {
-                const bool dropped = dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
-                if (body.alive && (dropped || body.worstFrameResidual_mm2 > frameGate_mm2))
-                    refine(session, body, config_.refineIterations, true, frameGate_mm2);
-                if (body.alive && keepTheLargestRigidGroup(body))
-                    refine(session, body, config_.refineIterations, true, frameGate_mm2);
-            }
-    }
+    settleLayouts(session);
 
     const auto minFramesInFour =
         static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
@@ -310,6 +276,45 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
 }
 
+void CalibrationCompletion::settleLayouts(const SessionBuffer& session) {
+    for (Body& body : bodies_)
+        if (body.alive) {
+            refine(session, body, config_.refineIterations, true);
+            if (mergeCrowdedMarkers(body))
+                refine(session, body, config_.refineIterations, true);
+        }
+    // The rig's noise, as the most rigid body shows it: the median over its markers of their
+    // typical squared residual. A marker whose points lie off its body's poses several times
+    // farther did not move with it (a point that rode along, a marker of another object), and
+    // a body all of whose markers do so is no rigid object (markers on skin).
+    double typical_mm2 = std::numeric_limits<double>::infinity();
+    for (const Body& body : bodies_) {
+        if (!body.alive)
+            continue;
+        std::vector<double> seen;
+        for (const double r2 : body.markerResidual_mm2)
+            if (r2 > 0.0)
+                seen.push_back(r2);
+        if (seen.size() >= config_.minModelMarkers)
+            typical_mm2 = std::min(typical_mm2, medianOf(seen));
+    }
+    if (!std::isfinite(typical_mm2))
+        return;
+    // Then the layout from the frames that fit as well as the rig measures: a frame posed
+    // wrongly (a near-likeness of the layout taken for it, a piece's pose kept through a join)
+    // pulls the layout by as much as it is off. Last, only the markers frames fix to the rest.
+    const double frameGate_mm2 = config_.maxFrameResidualRatio * typical_mm2;
+    for (Body& body : bodies_) {
+        if (!body.alive)
+            continue;
+        const bool dropped = dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2);
+        if (body.alive && (dropped || body.worstFrameResidual_mm2 > frameGate_mm2))
+            refine(session, body, config_.refineIterations, true, frameGate_mm2);
+        if (body.alive && keepTheLargestRigidGroup(body))
+            refine(session, body, config_.refineIterations, true, frameGate_mm2);
+    }
+}
+
 bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
     std::vector<Vec3> kept;
     for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
@@ -328,13 +333,12 @@ bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, doub
 }
 
 bool CalibrationCompletion::keepTheLargestRigidGroup(Body& body) {
-
     if (body.rigidGroups.size() < 2)
         return false;
     const auto seenOf = [&](const MarkerBits& group) {
         std::uint64_t seen = 0;
         for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
-            if ((group[k / 64] >> (k % 64)) & 1U)
+            if (holds(group, k))
                 seen += body.markerFrames[k];
         return seen;
     };
@@ -344,7 +348,7 @@ bool CalibrationCompletion::keepTheLargestRigidGroup(Body& body) {
             largest = &group;
     std::vector<Vec3> kept;
     for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
-        if (((*largest)[k / 64] >> (k % 64)) & 1U)
+        if (holds(*largest, k))
             kept.push_back(body.markers_mm[k]);
     if (kept.size() == body.markers_mm.size())
         return false;

@@ -285,6 +285,10 @@ private:
     /// maxResidualRatio times \a typical_mm2, the rig's: they did not move with the body. A body
     /// left with fewer than minModelMarkers is no longer alive. Whether it changed the body.
     bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
+    /// \brief The bodies' final layouts: refined over all their poses, then judged against the
+    /// rig's noise (markers that did not move with their body, frames posed wrongly) and cut to
+    /// what frames fix (keepTheLargestRigidGroup), each body's precision measured last.
+    void settleLayouts(const SessionBuffer& session);
     /// \brief Keep only the markers of the body's rigid group seen most (refine() found the
     /// groups): the others are tied to it by markers on one line at most, and their places about
     /// it are fixed by no frame. Whether any was dropped.

@@ -465,7 +465,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             if (judge && last) {
                 MarkerBits seen{};
                 for (const std::size_t k : which)
-                    seen[k / 64] |= std::uint64_t{1} << (k % 64);
+                    add(seen, k);
                 // A handover: the frame before, posed too, carries the pose on by continuity.
                 if (previousPosed + 1 == f) {
                     MarkerBits joined = previousSeen;

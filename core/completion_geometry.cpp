@@ -423,7 +423,7 @@ namespace {
 bool offOneLine(const MarkerBits& shared, std::span<const Vec3> layout, double minSpread_mm) {
     std::vector<Vec3> points;
     for (std::size_t k = 0; k < layout.size(); ++k)
-        if ((shared[k / 64] >> (k % 64)) & 1U)
+        if (holds(shared, k))
             points.push_back(layout[k]);
     if (points.size() < 3)
         return false;

@@ -282,6 +282,12 @@ RigidTransform extrapolate(const RigidTransform& at0, double t0_s, const RigidTr
 
 /// A set of a layout's markers (up to 128), one bit each.
 using MarkerBits = std::array<std::uint64_t, 2>;
+inline bool holds(const MarkerBits& set, std::size_t marker) {
+    return ((set[marker / 64] >> (marker % 64)) & 1U) != 0;
+}
+inline void add(MarkerBits& set, std::size_t marker) {
+    set[marker / 64] |= std::uint64_t{1} << (marker % 64);
+}
 
 /**
  * \brief The rigid groups of \a layout (body frame, mm) seen in \a views (the markers matched in

@@ -264,7 +264,7 @@ TEST(RigidGroups, TiesViewsThatShareThreeMarkersOffOneLine) {
     const auto bits = [](std::initializer_list<std::size_t> markers) {
         MarkerBits b{};
         for (const std::size_t k : markers)
-            b[k / 64] |= std::uint64_t{1} << (k % 64);
+            completion_detail::add(b, k);
         return b;
     };
     // Markers 0-2 on the x axis, 3-5 off it.
