@@ -315,21 +315,32 @@ void CalibrationCompletion::settleLayouts(const SessionBuffer& session) {
     }
 }
 
-bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
+namespace {
+
+/// Keeps the markers of \a markers_mm whose index \a keep holds for; how many went.
+template <typename Keep>
+std::size_t keepMarkers(std::vector<Vec3>& markers_mm, Keep keep) {
     std::vector<Vec3> kept;
-    for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
-        if (body.markerResidual_mm2[k] <= config_.maxResidualRatio * typical_mm2)
-            kept.push_back(body.markers_mm[k]);
-    if (kept.size() == body.markers_mm.size())
-        return false;
-    counters_.markersNotRigid += body.markers_mm.size() - kept.size();
-    if (kept.size() < config_.minModelMarkers) {
+    for (std::size_t k = 0; k < markers_mm.size(); ++k)
+        if (keep(k))
+            kept.push_back(markers_mm[k]);
+    const std::size_t dropped = markers_mm.size() - kept.size();
+    markers_mm = std::move(kept);
+    return dropped;
+}
+
+} // namespace
+
+bool CalibrationCompletion::dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2) {
+    const std::size_t dropped = keepMarkers(body.markers_mm, [&](std::size_t k) {
+        return body.markerResidual_mm2[k] <= config_.maxResidualRatio * typical_mm2;
+    });
+    counters_.markersNotRigid += dropped;
+    if (dropped > 0 && body.markers_mm.size() < config_.minModelMarkers) {
         body.alive = false;
         ++counters_.droppedNotRigid;
-        return true;
     }
-    body.markers_mm = std::move(kept);
-    return true;
+    return dropped > 0;
 }
 
 bool CalibrationCompletion::keepTheLargestRigidGroup(Body& body) {
@@ -346,15 +357,10 @@ bool CalibrationCompletion::keepTheLargestRigidGroup(Body& body) {
     for (const MarkerBits& group : body.rigidGroups)
         if (seenOf(group) > seenOf(*largest))
             largest = &group;
-    std::vector<Vec3> kept;
-    for (std::size_t k = 0; k < body.markers_mm.size(); ++k)
-        if (holds(*largest, k))
-            kept.push_back(body.markers_mm[k]);
-    if (kept.size() == body.markers_mm.size())
-        return false;
-    counters_.markersNotFixed += body.markers_mm.size() - kept.size();
-    body.markers_mm = std::move(kept);
-    return true;
+    const std::size_t dropped =
+        keepMarkers(body.markers_mm, [&](std::size_t k) { return holds(*largest, k); });
+    counters_.markersNotFixed += dropped;
+    return dropped > 0;
 }
 
 bool CalibrationCompletion::mergeCrowdedMarkers(Body& body) {
@@ -368,15 +374,10 @@ bool CalibrationCompletion::mergeCrowdedMarkers(Body& body) {
                 continue;
             drop[body.markerFrames[a] >= body.markerFrames[b] ? b : a] = true;
         }
-    if (std::none_of(drop.begin(), drop.end(), [](bool d) { return d; }))
-        return false;
-    std::vector<Vec3> kept;
-    for (std::size_t k = 0; k < n; ++k)
-        if (!drop[k])
-            kept.push_back(body.markers_mm[k]);
-    counters_.markersRemoved += n - kept.size();
-    body.markers_mm = std::move(kept);
-    return true;
+    const std::size_t dropped =
+        keepMarkers(body.markers_mm, [&](std::size_t k) { return !drop[k]; });
+    counters_.markersRemoved += dropped;
+    return dropped > 0;
 }
 
 void CalibrationCompletion::keepJoinedPosesThatStillFit(const SessionBuffer& session, Body& body,

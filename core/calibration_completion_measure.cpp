@@ -25,9 +25,6 @@ constexpr double kDegree = std::numbers::pi / 180.0;
 /// Steps of the joint least squares that place the layouts for the join (refinedMarkers()): one
 /// joined the same pieces as four in every sweep, at a quarter of the cost.
 constexpr int kJoinRefineIterations = 1;
-/// Three or more shared markers tie two rigid groups when they lie this far off one line (mm):
-/// the tracker's minPoseSpread_mm.
-constexpr double kMinGroupSpread_mm = 3.0;
 /// Squared distance from the cameras (mm^2) at which markerResidual_mm2 is in the rig's units.
 constexpr double kNoiseDistance2_mm2 = 1000.0 * 1000.0;
 /// A place holds points within this many times the median distance of an object's points from
@@ -505,8 +502,11 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     // A marker's typical squared residual: the median, which a few frames that matched it to
     // a wrong point do not move.
     body.markerFrames = counts;
+    // Shared markers tie two groups when they lie as far off one line as the tracker asks of a
+    // pose's markers.
     if (judge)
-        body.rigidGroups = rigidGroupsOf(viewSets, body.markers_mm, kMinGroupSpread_mm);
+        body.rigidGroups =
+            rigidGroupsOf(viewSets, body.markers_mm, config_.tracking.minPoseSpread_mm);
     body.markerResidual_mm2.assign(n, 0.0);
     for (std::size_t k = 0; k < n && judge; ++k)
         if (!residuals[k].empty())
