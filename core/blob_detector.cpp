@@ -914,8 +914,8 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
 std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_bytes,
                                        const Blob& blob, std::span<const DiscOnLine> discs,
                                        std::span<Blob> parts, std::span<bool> placed) {
-    if (discs.size() < 2 || discs.size() > kMaxLineDiscs || parts.size() < discs.size() ||
-        placed.size() < discs.size())
+    if (discs.empty() || (discs.size() == 1 && !discs[0].free) || discs.size() > kMaxLineDiscs ||
+        parts.size() < discs.size() || placed.size() < discs.size())
         return 0;
     std::fill_n(placed.begin(), discs.size(), false);
     // The blob's own pixels grow from its brightest pixel next to its centre.
@@ -947,36 +947,48 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
     const Vec2 origin(blob.left - 1, blob.top - 1);
     const Vec2* edge = splitEdge_.get();
     const std::size_t count = discs.size();
+    // A free disc's centre is onLine + at * along + across * normal, from its start along x and y;
+    // a line's disc keeps across at zero.
     std::array<Vec2, kMaxLineDiscs> onLine{}, along{};
-    std::array<double, kMaxLineDiscs> at{};
+    std::array<double, kMaxLineDiscs> at{}, across{};
     std::array<Circle, kMaxLineDiscs> circle{};
+    const auto movable = [&](std::size_t k) { return !discs[k].fixed && !discs[k].free; };
+    const auto placeOf = [&](std::size_t k) {
+        return Vec2(onLine[k] + at[k] * along[k] + across[k] * Vec2(-along[k].y(), along[k].x()));
+    };
     for (std::size_t k = 0; k < count; ++k) {
+        const bool onItsLine = movable(k);
         const double length = discs[k].line.direction.norm();
-        if (!(length > 1e-9) || !(discs[k].radius_px >= 1.0) || !(discs[k].radius_px < kSplitSide))
+        if ((onItsLine && !(length > 1e-9)) || !(discs[k].radius_px >= 1.0) ||
+            !(discs[k].radius_px < kSplitSide))
             return 0;
-        onLine[k] = discs[k].line.point_px - origin;
-        along[k] = discs[k].line.direction / length;
-        const Vec2 start = (discs[k].known ? discs[k].start_px : blob.centre_px) - origin;
-        at[k] = discs[k].fixed ? 0.0 : (start - onLine[k]).dot(along[k]);
-        circle[k].centre = discs[k].fixed ? start : onLine[k] + at[k] * along[k];
+        const Vec2 start =
+            (discs[k].known || !onItsLine ? discs[k].start_px : blob.centre_px) - origin;
+        onLine[k] = onItsLine ? Vec2(discs[k].line.point_px - origin) : start;
+        along[k] = onItsLine ? Vec2(discs[k].line.direction / length) : Vec2::UnitX();
+        at[k] = onItsLine ? (start - onLine[k]).dot(along[k]) : 0.0;
+        circle[k].centre = placeOf(k);
         circle[k].radius = discs[k].radius_px;
     }
 
     // A disc of unknown place must own some of the outline: points more than a pixel outside
     // every disc already known. A blob that its known discs explain (one disc, with a line of
     // another blob merely crossing it) is left as it is, before the costly scans.
-    bool anyKnown = false;
+    bool anyKnown = false, anyUnknown = false;
     std::size_t outsideKnown = 0;
-    for (std::size_t k = 0; k < count; ++k)
-        anyKnown = anyKnown || discs[k].known || discs[k].fixed;
-    for (std::size_t i = 0; i < edges && anyKnown; ++i) {
+    for (std::size_t k = 0; k < count; ++k) {
+        const bool known = discs[k].known || !movable(k);
+        anyKnown = anyKnown || known;
+        anyUnknown = anyUnknown || !known;
+    }
+    for (std::size_t i = 0; i < edges && anyKnown && anyUnknown; ++i) {
         bool outside = true;
         for (std::size_t k = 0; k < count && outside; ++k)
-            outside = !(discs[k].known || discs[k].fixed) ||
+            outside = !(discs[k].known || !movable(k)) ||
                       (edge[i] - circle[k].centre).norm() > circle[k].radius + 1.0;
         outsideKnown += outside ? 1U : 0U;
     }
-    if (anyKnown && outsideKnown < 5)
+    if (anyKnown && anyUnknown && outsideKnown < 5)
         return 0;
 
     // Each movable centre's place on its line, first by scans over the blob's extent: a place is
@@ -1045,7 +1057,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         }
     };
     for (std::size_t k = 0; k < count; ++k) {
-        if (discs[k].known || discs[k].fixed)
+        if (discs[k].known || !movable(k))
             continue;
         // The movable disc whose line passes nearest this one's centre guess, if near enough
         // for the two discs to overlap.
@@ -1053,7 +1065,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         double nearestOff = std::numeric_limits<double>::infinity();
         const Vec2 guess = onLine[k] + (middle - onLine[k]).dot(along[k]) * along[k];
         for (std::size_t j = 0; j < count; ++j) {
-            if (j == k || discs[j].fixed)
+            if (j == k || !movable(j))
                 continue;
             const Vec2 toLine = guess - onLine[j];
             const double off = std::abs(toLine.x() * along[j].y() - toLine.y() * along[j].x());
@@ -1065,7 +1077,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         scan(k, nearest);
     }
     for (std::size_t k = 0; k < count; ++k)
-        if (!discs[k].fixed)
+        if (movable(k))
             scan(k, count);
 
     // Then each movable circle is fitted (its place on the line and its radius) to its own
@@ -1085,19 +1097,24 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
                     offNearest = off;
                 }
             }
+            // A free disc may be cut by an edge in front of it: its own points are never inside
+            // its circle, where a cut runs (see kCutInside_px).
+            const double inside = discs[nearest].free ? kFreeDiscInside_px : 1.0;
             owner[i] =
-                near == 1 && offNearest >= -1.0 ? static_cast<std::uint8_t>(nearest) : kNoOwner;
+                near == 1 && offNearest >= -inside ? static_cast<std::uint8_t>(nearest) : kNoOwner;
         }
     };
-    // The normal equations of circle k's place and radius over its own points.
+    // The normal equations of circle k's place (along its line, and across it for a free disc)
+    // and radius over its own points.
     struct Normal {
-        Eigen::Matrix2d jtj = Eigen::Matrix2d::Zero();
-        Eigen::Vector2d jtr = Eigen::Vector2d::Zero();
+        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
         double sum2 = 0.0;
         std::size_t n = 0;
     };
     const auto normalOf = [&](std::size_t k) {
         Normal e;
+        const Vec2 normal(-along[k].y(), along[k].x());
         for (std::size_t i = 0; i < edges; ++i) {
             if (owner[i] != k)
                 continue;
@@ -1105,7 +1122,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
             const double length = d.norm();
             if (length < 1e-9)
                 continue;
-            const Eigen::Vector2d j(-d.dot(along[k]) / length, -1.0);
+            const Eigen::Vector3d j(-d.dot(along[k]) / length, -d.dot(normal) / length, -1.0);
             const double off = length - circle[k].radius;
             e.jtj += j * j.transpose();
             e.jtr += j * off;
@@ -1114,9 +1131,23 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         }
         // The other camera's size of the disc holds the radius where a short arc would trade it
         // for the place on the line.
-        e.jtj(1, 1) += kRadiusPrior;
-        e.jtr(1) += kRadiusPrior * (circle[k].radius - discs[k].radius_px);
+        e.jtj(2, 2) += kRadiusPrior;
+        e.jtr(2) += kRadiusPrior * (circle[k].radius - discs[k].radius_px);
         return e;
+    };
+    // The change of a disc's place and radius, and the variance of its place per unit of its
+    // points' variance: along its line, or the larger of x and y for a free disc.
+    const auto solve = [&](std::size_t k, const Normal& e, Eigen::Vector3d& change) {
+        if (discs[k].free) {
+            change = e.jtj.ldlt().solve(-e.jtr);
+            const Eigen::Matrix3d inverse = e.jtj.inverse();
+            return std::max(inverse(0, 0), inverse(1, 1));
+        }
+        Eigen::Matrix2d jtj;
+        jtj << e.jtj(0, 0), e.jtj(0, 2), e.jtj(2, 0), e.jtj(2, 2);
+        const Eigen::Vector2d onLineChange = jtj.ldlt().solve(-Eigen::Vector2d(e.jtr(0), e.jtr(2)));
+        change = {onLineChange.x(), 0.0, onLineChange.y()};
+        return jtj.inverse()(0, 0);
     };
     for (int pass = 0; pass < 6; ++pass) {
         findOwners();
@@ -1125,12 +1156,14 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
                 const Normal e = normalOf(k);
                 if (e.n < 5)
                     break; // judged below
-                const Eigen::Vector2d change = e.jtj.ldlt().solve(-e.jtr);
+                Eigen::Vector3d change;
+                solve(k, e, change);
                 if (!change.allFinite())
                     return 0;
                 at[k] += change.x();
-                circle[k].radius += change.y();
-                circle[k].centre = onLine[k] + at[k] * along[k];
+                across[k] += change.y();
+                circle[k].radius += change.z();
+                circle[k].centre = placeOf(k);
                 if (change.squaredNorm() < 1e-8)
                     break;
             }
@@ -1150,10 +1183,16 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         // The standard error of the place on the line, from the points' scatter (no less than
         // kLineNoise_px) and how the arc's points constrain it.
         const double spread = std::max(circle[k].rms, kLineNoise_px);
-        const double placeError = spread * std::sqrt(e.jtj.inverse()(0, 0));
+        Eigen::Vector3d unused;
+        const double placeError = spread * std::sqrt(solve(k, e, unused));
+        // A free disc that wandered off its start took another disc's arc.
+        bool strayed =
+            discs[k].free && std::hypot(at[k], across[k]) > kFreeDiscReach * discs[k].radius_px;
+        for (std::size_t j = 0; j < count && discs[k].free; ++j)
+            strayed = strayed || (j != k && (circle[j].centre - circle[k].centre).norm() < 1.0);
         if (e.n < 5 || circle[k].rms > kSplitFitRms_px || !(placeError <= kLinePlaceError_px) ||
             circle[k].radius < 0.75 * discs[k].radius_px ||
-            circle[k].radius > 1.33 * discs[k].radius_px)
+            circle[k].radius > 1.33 * discs[k].radius_px || strayed)
             continue;
         Blob& part = parts[k];
         part = blob;
@@ -1167,7 +1206,10 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         placed[k] = true;
         ++placedCount;
     }
-    if (placedCount > 0)
+    // Fits of free discs are counted by their caller (MarkerPipeline: markers found where
+    // expected); these are splits on lines.
+    if (placedCount > 0 &&
+        std::none_of(discs.begin(), discs.end(), [](const DiscOnLine& d) { return d.free; }))
         ++counters_.splitOnLines;
     return placedCount;
 }

@@ -72,6 +72,10 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
     if (config_.stereo.continuity_mm > 0.0)
         noteContinuedPoints();
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
+        config_.stereo.seekExpectedMarkers && config_.blobs.splitMerged &&
+        images[0].pixels != nullptr && images[1].pixels != nullptr)
+        splitWhereMarkersAreExpected(images);
+    if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
         config_.stereo.maxCarriedFrames > 0)
         carryHiddenMarkers(images);
     points_rig_mm_.clear();
@@ -87,13 +91,15 @@ void MarkerPipeline::rememberForContinuity() {
     current_.clear();
     for (std::size_t m = 0; m < points_rig_mm_.size(); ++m) {
         const Vec3& point = points_rig_mm_[m];
-        LastPoint next{point, point, 0, 0, 0};
+        LastPoint next{point, point, 0, 0, 0, markerSize(m)};
         if (const int at = continuesLast_[m]; at >= 0) {
             const LastPoint& last = last_[static_cast<std::size_t>(at)];
             next.age = last.age + 1;
             if (last.missing == 0)
                 next.expected_rig_mm = point + (point - last.position_rig_mm);
             next.carried = markers_[m].carried ? last.carried + 1 : 0;
+            if (next.size_pxmm == 0.0)
+                next.size_pxmm = last.size_pxmm;
         }
         current_.push_back(next);
     }
@@ -116,14 +122,6 @@ void MarkerPipeline::rememberForContinuity() {
     });
     std::swap(last_, current_);
 }
-
-namespace {
-/// Whether \a a and \b b are parts of one blob split into discs (they keep its bounds).
-bool partsOfOneBlob(const Blob& a, const Blob& b) {
-    return a.split && b.split && a.left == b.left && a.top == b.top && a.right == b.right &&
-           a.bottom == b.bottom;
-}
-} // namespace
 
 template <typename Visit>
 void MarkerPipeline::forEachUnpaired(int camera, Visit visit) const {
@@ -710,6 +708,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
     c.splitAttemptsSkipped = splitAttemptsSkipped_;
     c.pairsForContinuity = pairsForContinuity_;
     c.carriedMarkers = carriedMarkers_;
+    c.markersSplitWhereExpected = markersSplitWhereExpected_;
     return c;
 }
 

@@ -43,6 +43,8 @@ struct MarkerPipelineCounters {
     /// Markers carried on from one camera's blob while hidden in the other image inside another
     /// marker's blob (StereoConfig::maxCarriedFrames): marker-frames.
     std::uint64_t carriedMarkers = 0;
+    /// Markers found again in a blob of several discs where they were expected.
+    std::uint64_t markersSplitWhereExpected = 0;
     std::uint64_t blobOverflow = 0;
     std::uint64_t labelOverflow = 0;
     std::uint64_t markerOverflow = 0;
@@ -99,7 +101,9 @@ public:
      * with other discs (markers far over each other in that image, apart in this one). That blob
      * is then split again on the epipolar lines of all its discs (BlobDetector::splitOnLines()),
      * and each disc triangulated with its partner. A blob the detector refused as not round is
-     * split so too, when two or more unpaired blobs' lines cross it.
+     * split so too, when two or more unpaired blobs' lines cross it. A marker of the frame before
+     * that nothing continues is then sought in a blob of several discs where it is expected
+     * (StereoConfig::seekExpectedMarkers).
      * \param images the images of this frame's detectBlobs(), or none (blobs given from outside).
      */
     void matchStereo(StereoMethod method = StereoMethod::Svd,
@@ -154,6 +158,22 @@ private:
     /// After the split pass: which of the last frame's points this frame's markers continue
     /// (lastContinued_, lastStep_, continuesLast_).
     void noteContinuedPoints();
+    /// After noteContinuedPoints(): each point of the last frame that had continued one before
+    /// and that no marker continues now (or missing for up to kMaxMissingFrames) is sought where
+    /// it is expected (its own last step carried on; its neighbours' while missing). Where a blob
+    /// of several discs covers that place in an image (parts of a split blob, a blob refused as
+    /// not round, or a blob that passed as one disc but is larger than its marker was by
+    /// kOwnBlobSize), the blob is fitted again with a free disc for each marker sought in it,
+    /// of the size it had, the blob's parts free beside them (BlobDetector::splitOnLines(),
+    /// DiscOnLine::free). A disc placed so, paired with the marker's disc or own unpaired blob in
+    /// the other image, is the marker when it triangulates within StereoConfig::continuity_mm of
+    /// where it was expected; a marker stereo made of a whole blob in which such a disc was found
+    /// (the middle of several discs) goes. Trackers follow blobs through merges the same way: the
+    /// guess seeds the fit, the outline measures the place.
+    void splitWhereMarkersAreExpected(const std::array<ImageView, 2>& images);
+    /// Radius (px) times range (mm) of marker \a m's blobs, the mean of both cameras'; 0 when
+    /// unknown (a carried marker's other blob covers several discs).
+    double markerSize(std::size_t m) const;
     /// The step (mm) from the last frame to this one of the points near last_[\a hidden] that a
     /// marker continues (within kNeighbourhood_mm, the nearer weighing more); zero when none.
     /// Not its own last step carried on: a marker about to hide moves its disc into another's,
@@ -261,6 +281,8 @@ private:
         std::uint32_t carried = 0;
         /// Frames it has been missing (0: a point of the last frame).
         std::uint32_t missing = 0;
+        /// Its blobs' radius (px) times range (mm), as markerSize(); 0 when unknown.
+        double size_pxmm = 0.0;
     };
     /// The last frame's points in order of expected x, and this frame's while it is remembered
     /// (the two swap their storage).
@@ -285,6 +307,8 @@ private:
     /// (false markers 31 / 63 -> 32 / 61), 97.57 / 98.26% with 10 (37 / 59).
     static constexpr std::uint32_t kMaxMissingFrames = 5;
     std::uint64_t carriedMarkers_ = 0;
+    /// Markers found by splitWhereMarkersAreExpected().
+    std::uint64_t markersSplitWhereExpected_ = 0;
     /// A pair gives way only to one continuing a point that had continued this many frames (0.2 s
     /// at 100 Hz): a ghost the correspondence made can last a few dozen frames (two markers on
     /// one line in both cameras, paired crosswise), and must not be carried on against the
@@ -298,6 +322,13 @@ private:
     /// Splits on epipolar lines tried a frame at most: a blob's fit takes tens of microseconds,
     /// and a burst of reflections offers hundreds of blobs without a partner.
     static constexpr std::size_t kMaxSplitAttempts = 24;
+    /// Markers splitWhereMarkersAreExpected() seeks a frame at most.
+    static constexpr std::size_t kMaxSoughtMarkers = 64;
+    /// An unpaired blob where a sought marker is expected is its own only when its radius is
+    /// less than this times the marker's: larger, it holds another disc too.
+    static constexpr double kOwnBlobSize = 1.1;
+    /// continuesLast_ of a marker splitWhereMarkersAreExpected() drops.
+    static constexpr int kDroppedMarker = -2;
     std::size_t splitAttemptsLeft_ = 0;
     std::uint64_t splitAttemptsSkipped_ = 0;
     const char* error_ = nullptr;

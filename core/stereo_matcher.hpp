@@ -50,6 +50,12 @@ struct StereoConfig {
     /// many frames in a row: its point taken on the seeing camera's ray, nearest where it is
     /// expected (StereoMarker::carried). 0 turns this off.
     std::uint32_t maxCarriedFrames = 20;
+    /// A marker of the last frame that no pair continues now is sought where it is expected: a
+    /// blob of several discs there (split, refused, or passed as one disc) is fitted again with
+    /// a disc of its size starting there, and the disc, paired with its blob in the other image,
+    /// is the marker when it triangulates within continuity_mm of where it was expected
+    /// (MarkerPipeline, given the images). false turns this off (as does continuity_mm = 0).
+    bool seekExpectedMarkers = true;
     /// Markers kept per frame; more are counted as overflow.
     std::size_t maxMarkers = 256;
 

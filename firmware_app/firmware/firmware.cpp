@@ -652,6 +652,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.stereoPairsRefusedBySize = markers_.stereo().counters().rejectedSize;
     counters_.stereoPairsForContinuity = refused.pairsForContinuity;
     counters_.markersCarried = refused.carriedMarkers;
+    counters_.markersFoundWhereExpected = refused.markersSplitWhereExpected;
     counters_.labelOverflow = refused.labelOverflow;
     counters_.markerOverflow = refused.markerOverflow;
     ++counters_.framesProcessed;
@@ -762,6 +763,7 @@ std::string Firmware::statusReport() const {
     row("stereo pairs refused: blob sizes fit no one marker", c.stereoPairsRefusedBySize);
     row("stereo pairs changed to continue a marker", c.stereoPairsForContinuity);
     row("markers carried while hidden in one image", c.markersCarried);
+    row("markers found where expected", c.markersFoundWhereExpected);
     row("blob labels refused (capacity)", c.labelOverflow);
     row("markers refused (capacity)", c.markerOverflow);
     const ModelTrackingCounters& t = tracker_->counters();

@@ -91,6 +91,8 @@ struct FirmwareCounters {
     std::uint64_t stereoPairsForContinuity = 0;
     /// Markers carried while hidden in one image inside another marker's blob (marker-frames).
     std::uint64_t markersCarried = 0;
+    /// Markers found again in a blob of several discs where they were expected.
+    std::uint64_t markersFoundWhereExpected = 0;
     std::uint64_t calibrationsStarted = 0;
     std::uint64_t calibrationsSaved = 0;
     std::uint64_t calibrationsEmpty = 0;

@@ -101,6 +101,7 @@ void readStereo(Section& s, StereoConfig& c) {
     s.real("max_size_mismatch", c.maxSizeMismatch, 0.0, Section::kNoLimit);
     s.real("continuity_mm", c.continuity_mm, 0.0, Section::kNoLimit);
     s.integer("max_carried_frames", c.maxCarriedFrames, 0, 1000);
+    s.flag("seek_expected_markers", c.seekExpectedMarkers);
     s.integer("max_markers", c.maxMarkers, 1, 65535);
     s.require(c.maxDepth_mm > c.minDepth_mm, "max_depth_mm", "must be > min_depth_mm");
 }

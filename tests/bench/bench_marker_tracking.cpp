@@ -218,19 +218,23 @@ void runFrontEnd(benchmark::State& state, const FrameRun& run, MarkerPipeline& p
 // The whole front end on the touching scene, where a third of the markers touch another in one
 // image, over 32 consecutive frames. With "lines" set, stereo goes back to the images and splits
 // blobs on the other camera's epipolar lines; with "carry" set, markers hidden in one image are
-// carried on (StereoConfig::maxCarriedFrames): the differences are what those steps cost.
+// carried on (StereoConfig::maxCarriedFrames); with "seek" set, markers of the frame before are
+// sought where they are expected (StereoConfig::seekExpectedMarkers): the differences are what
+// those steps cost.
 void BM_FrontEndTouching(benchmark::State& state) {
     const FrameRun run("touching", 300, 32);
     MarkerPipelineConfig config;
     config.stereo.maxCarriedFrames = state.range(1) != 0 ? StereoConfig{}.maxCarriedFrames : 0;
+    config.stereo.seekExpectedMarkers = state.range(2) != 0;
     MarkerPipeline pipeline(run.world.rig(), config);
     runFrontEnd(state, run, pipeline, state.range(0) != 0);
 }
 BENCHMARK(BM_FrontEndTouching)
-    ->ArgNames({"lines", "carry"})
-    ->Args({0, 0})
-    ->Args({1, 0})
-    ->Args({1, 1})
+    ->ArgNames({"lines", "carry", "seek"})
+    ->Args({0, 0, 0})
+    ->Args({1, 0, 0})
+    ->Args({1, 1, 0})
+    ->Args({1, 1, 1})
     ->Unit(benchmark::kMicrosecond);
 
 // The whole front end on the crowd (60-70 markers a frame), with and without the step that keeps

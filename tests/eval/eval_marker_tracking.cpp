@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <numeric>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -67,6 +68,10 @@ struct Totals {
     /// bins below 0.5, 0.75, 1 and from 1 (apart in both images).
     std::array<std::uint64_t, 4> exactBySeparation{};
     std::array<std::uint64_t, 4> lostBySeparation{};
+    /// Of those found from exact blobs, markers whose centre lies behind a nearer marker's sphere
+    /// in some image (that camera sees a crescent of it at most), and of them, lost.
+    std::uint64_t exactBehindMarker = 0;
+    std::uint64_t lostBehindMarker = 0;
     /// Of the lost: no blob within 1.5 px of the marker in some camera.
     std::array<std::uint64_t, 4> lostWithoutBlob{};
 };
@@ -167,6 +172,9 @@ int main(int argc, char** argv) {
                    "continues one within this distance (mm; 0: off)");
     app.add_option("--carry", stereoConfig.maxCarriedFrames,
                    "frames in a row a marker hidden in one image is carried on (0: off)");
+    app.add_option("--seek", stereoConfig.seekExpectedMarkers,
+                   "seek a marker of the frame before where it is expected in blobs of several "
+                   "discs (true / false)");
     FrameToFrameConfig trackConfig;
     app.add_option("--sigma-t", trackConfig.sigma_mm, "sigma_t of eq. 5 (mm)");
     app.add_option("--gate", trackConfig.gate_mm, "frame-to-frame gate (mm)");
@@ -276,6 +284,16 @@ int main(int argc, char** argv) {
                 }
                 const std::size_t bin = separationBin(separation);
                 ++totals.exactBySeparation[bin];
+                // Its centre behind a nearer marker's sphere in some image: a crescent at most.
+                bool hidden = false;
+                for (std::size_t c = 0; c < 2; ++c)
+                    for (const sim::MarkerView& other : observation.markers)
+                        hidden =
+                            hidden || (&other != &m && other.visible[c] &&
+                                       other.depth_mm[c] < m.depth_mm[c] &&
+                                       (other.pixel[c] - m.pixel[c]).norm() < other.radius_px[c]);
+                totals.exactBehindMarker += hidden ? 1U : 0U;
+                totals.lostBehindMarker += hidden && !atImages[i] ? 1U : 0U;
                 if (!atImages[i]) {
                     ++totals.lostBySeparation[bin];
                     totals.lostWithoutBlob[bin] += withoutBlob ? 1U : 0U;
@@ -446,6 +464,19 @@ int main(int argc, char** argv) {
         "  markers carried while hidden in one image: %llu marker-frames, %llu of them false\n",
         static_cast<unsigned long long>(pc.carriedMarkers),
         static_cast<unsigned long long>(totals.falseCarried));
+    std::printf("  found from exact blobs with the centre behind a nearer marker in some image: "
+                "%llu, lost %llu; found of the rest %.2f%%\n",
+                static_cast<unsigned long long>(totals.exactBehindMarker),
+                static_cast<unsigned long long>(totals.lostBehindMarker),
+                100.0 - 100.0 *
+                            static_cast<double>(std::accumulate(totals.lostBySeparation.begin(),
+                                                                totals.lostBySeparation.end(),
+                                                                std::uint64_t{0}) -
+                                                totals.lostBehindMarker) /
+                            static_cast<double>(std::max<std::uint64_t>(
+                                1, totals.foundFromExactBlobs - totals.exactBehindMarker)));
+    std::printf("  markers found again in a blob of several discs where they were expected: %llu\n",
+                static_cast<unsigned long long>(pc.markersSplitWhereExpected));
     const BlobCounters& bc = pipeline.detector(0).counters();
     std::printf("  blobs (camera 0): accepted %llu, not round %llu (cut discs %llu), small %llu, "
                 "large %llu\n",

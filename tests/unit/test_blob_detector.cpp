@@ -535,6 +535,81 @@ TEST(BlobDetector, PlacesNoDiscWithoutAnArcOfItsOwn) {
     EXPECT_FALSE(placed[1]) << "a line through no disc";
 }
 
+TEST(BlobDetector, FindsDiscsFarOverEachOtherFromWhereTheyWereExpected) {
+    // Two discs 0.15 to 0.3 diameters apart, as a marker hidden behind another or both in a
+    // cluster are, with no line from the other camera to hold either: each is started a pixel
+    // from its centre (where it was expected) with the size it had, and found within 0.15 px.
+    // The blob's own centre lies between them.
+    Image image(640, 480);
+    const std::vector<sim::Glint> pairs[] = {{disc(100.3, 100.6, 8.0), disc(103.9, 101.5, 8.0)},
+                                             {disc(300.45, 200.2, 8.5), disc(298.2, 203.9, 8.0)},
+                                             {disc(450.2, 300.7, 9.0), disc(452.1, 299.6, 9.0)}};
+    std::vector<sim::Glint> all;
+    for (const auto& pair : pairs)
+        all.insert(all.end(), pair.begin(), pair.end());
+    // A twin of each pair's first disc alone, for the outline radius of such a disc.
+    all.push_back(disc(100.0, 400.0, 8.0));
+    drawSpots(image, all);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    const double outlineGrowth_px = nearestBlob(blobs, {100.0, 400.0})->discRadius_px() - 8.0;
+    double sum2 = 0.0;
+    for (const auto& pair : pairs) {
+        const Blob* blob = nearestBlob(blobs, 0.5 * (pair[0].centre_px + pair[1].centre_px));
+        ASSERT_NE(blob, nullptr);
+        EXPECT_GT((blob->centre_px - pair[0].centre_px).norm(), 0.5)
+            << "detection alone does not find the first disc";
+        std::array<DiscOnLine, 2> discs{};
+        for (std::size_t k = 0; k < 2; ++k) {
+            discs[k].free = true;
+            discs[k].start_px = pair[k].centre_px + Vec2(k == 0 ? 0.8 : -0.6, 0.6);
+            discs[k].radius_px = pair[k].radiusMajor_px + outlineGrowth_px;
+        }
+        std::array<Blob, 2> parts{};
+        std::array<bool, 2> placed{};
+        ASSERT_EQ(
+            detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts, placed),
+            2u)
+            << "pair at " << pair[0].centre_px.transpose();
+        for (std::size_t k = 0; k < 2; ++k) {
+            const double error = (parts[k].centre_px - pair[k].centre_px).norm();
+            EXPECT_LT(error, 0.25) << "disc at " << pair[k].centre_px.transpose();
+            sum2 += error * error;
+        }
+    }
+    EXPECT_LT(std::sqrt(sum2 / 6.0), 0.15);
+}
+
+TEST(BlobDetector, PlacesNoFreeDiscWhereNoneIsHidden) {
+    // A single disc, with a second disc expected 3 px from its centre: the disc's own circle
+    // explains the whole outline, and the second has no arc of its own. Nor does a lone free
+    // disc started beside the blob move onto it.
+    Image image(640, 480);
+    drawSpots(image, {disc(100.3, 100.6, 8.0)});
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.width, blobs);
+    ASSERT_EQ(blobs.size(), 1u);
+    std::array<DiscOnLine, 2> discs{};
+    discs[0].free = true;
+    discs[0].start_px = blobs[0].centre_px;
+    discs[0].radius_px = blobs[0].discRadius_px();
+    discs[1] = discs[0];
+    discs[1].start_px += Vec2(2.4, 1.8);
+    std::array<Blob, 2> parts{};
+    std::array<bool, 2> placed{};
+    detector.splitOnLines(image.pixels.data(), image.width, blobs[0], discs, parts, placed);
+    EXPECT_TRUE(placed[0]);
+    EXPECT_FALSE(placed[1]) << "a disc expected where none is hidden";
+    discs[0].start_px = blobs[0].centre_px + Vec2(6.0, 0.0);
+    EXPECT_EQ(detector.splitOnLines(image.pixels.data(), image.width, blobs[0],
+                                    std::span(discs.data(), 1), std::span(parts.data(), 1),
+                                    std::span(placed.data(), 1)),
+              0u)
+        << "a free disc does not stray to the blob";
+}
+
 TEST(BlobDetector, OverflowIsCountedNotWritten) {
     Image image(640, 480);
     std::vector<sim::Glint> spots;
