@@ -145,6 +145,7 @@ void readCalibration(Section& s, CalibrationConfig& c, CalibrationSessionSetting
     s.real("min_model_seen_s", completion.minModelSeen_s, 0.0, 3600.0);
     s.real("same_body_tolerance_mm", completion.sameBodyTolerance_mm, 0.0, Section::kNoLimit, true);
     s.real("triangle_tolerance_mm", completion.triangleTolerance_mm, 0.0, Section::kNoLimit, true);
+    s.real("max_marker_residual_ratio", completion.maxResidualRatio, 1.0, Section::kNoLimit);
     s.require(session.maxDuration_s >= session.minDuration_s, "max_duration_s",
               "must be >= min_duration_s");
 }
