@@ -436,6 +436,28 @@ PixelLine lineThrough(const Vec2& centre_px, const Vec2& direction, double befor
     return {centre_px - before_px * direction.normalized(), direction.normalized()};
 }
 
+/// Split \a blob into the two \a discs and measure the parts against \a pair's true centres:
+/// each within 0.25 px, a split part. \return the sum of their squared errors (px^2); infinity
+/// when not both were placed.
+double splitPairSquaredError(BlobDetector& detector, const Image& image, const Blob& blob,
+                             std::span<const DiscOnLine> discs,
+                             const std::vector<sim::Glint>& pair) {
+    std::array<Blob, 2> parts{};
+    std::array<bool, 2> placed{};
+    if (detector.splitOnLines(image.pixels.data(), image.width, blob, discs, parts, placed) != 2) {
+        ADD_FAILURE() << "pair at " << pair[0].centre_px.transpose() << " not split in two";
+        return std::numeric_limits<double>::infinity();
+    }
+    double sum2 = 0.0;
+    for (std::size_t k = 0; k < 2; ++k) {
+        const double error = (parts[k].centre_px - pair[k].centre_px).norm();
+        EXPECT_LT(error, 0.25) << "disc at " << pair[k].centre_px.transpose();
+        EXPECT_TRUE(parts[k].split);
+        sum2 += error * error;
+    }
+    return sum2;
+}
+
 TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
     // Two discs 0.22 to 0.24 diameters apart make one round blob with hardly a neck: detection
     // alone keeps some as one blob between them. With a line for each centre (in a rig, the
@@ -478,18 +500,7 @@ TEST(BlobDetector, SplitsDiscsFarOverEachOtherOnTheirLines) {
         discs[1].line = lineThrough(pair[1].centre_px, {1.0, -0.03}, -5.0);
         discs[1].radius_px = radiusOfTwin(pair[1], 1);
         discs[1].known = false;
-        std::array<Blob, 2> parts{};
-        std::array<bool, 2> placed{};
-        ASSERT_EQ(
-            detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts, placed),
-            2u)
-            << "pair at " << pair[0].centre_px.transpose();
-        for (std::size_t k = 0; k < 2; ++k) {
-            const double error = (parts[k].centre_px - pair[k].centre_px).norm();
-            EXPECT_LT(error, 0.25) << "disc at " << pair[k].centre_px.transpose();
-            EXPECT_TRUE(parts[k].split);
-            sum2 += error * error;
-        }
+        sum2 += splitPairSquaredError(detector, image, *blob, discs, pair);
     }
     EXPECT_LT(std::sqrt(sum2 / 6.0), 0.15);
     EXPECT_EQ(detector.counters().splitOnLines, 3u);
@@ -566,17 +577,7 @@ TEST(BlobDetector, FindsDiscsFarOverEachOtherFromWhereTheyWereExpected) {
             discs[k].start_px = pair[k].centre_px + Vec2(k == 0 ? 0.8 : -0.6, 0.6);
             discs[k].radius_px = pair[k].radiusMajor_px + outlineGrowth_px;
         }
-        std::array<Blob, 2> parts{};
-        std::array<bool, 2> placed{};
-        ASSERT_EQ(
-            detector.splitOnLines(image.pixels.data(), image.width, *blob, discs, parts, placed),
-            2u)
-            << "pair at " << pair[0].centre_px.transpose();
-        for (std::size_t k = 0; k < 2; ++k) {
-            const double error = (parts[k].centre_px - pair[k].centre_px).norm();
-            EXPECT_LT(error, 0.25) << "disc at " << pair[k].centre_px.transpose();
-            sum2 += error * error;
-        }
+        sum2 += splitPairSquaredError(detector, image, *blob, discs, pair);
     }
     EXPECT_LT(std::sqrt(sum2 / 6.0), 0.15);
 }
