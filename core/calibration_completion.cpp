@@ -242,9 +242,14 @@ std::vector<MarkerModel> CalibrationCompletion::trackingModels(std::size_t count
     // to be told from itself than are ever in view at once. The session does not need that
     // certainty: of all hypotheses the tracker takes the best (most markers, then least residual),
     // and a rare wrong pose scatters its points, which no marker's place collects.
-    for (MarkerModel& m : models)
-        m.sMin =
-            std::min<std::uint32_t>(m.sMin, static_cast<std::uint32_t>(config_.maxAcquireMarkers));
+    // Nor more than were ever seen together: a body that needs more is never found again (a
+    // ring of five seen four at a time, whose four-marker subsets look alike).
+    for (std::size_t b = 0; b < count; ++b) {
+        std::size_t most = config_.maxAcquireMarkers;
+        if (bodies_[b].mostSeenTogether > 0)
+            most = std::min(most, std::max(bodies_[b].mostSeenTogether, config_.minModelMarkers));
+        models[b].sMin = std::min<std::uint32_t>(models[b].sMin, static_cast<std::uint32_t>(most));
+    }
     return models;
 }
 

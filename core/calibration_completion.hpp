@@ -220,6 +220,8 @@ private:
         }
         /// How far its points lie from its places (mm): siteRadius_mm, or more where they scatter.
         double placeRadius_mm = 0.0;
+        /// The most of its markers seen in one frame while it was posed (measure()); 0 before.
+        std::size_t mostSeenTogether = 0;
         /// Places (body frame, mm) where points sat in a few frames, too few to be markers: where
         /// a piece of the same body, which holds them as markers, may register onto this one.
         std::vector<Vec3> glimpsed_mm;

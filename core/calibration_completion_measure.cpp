@@ -209,6 +209,8 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::vector<std::vector<Vec3>> seenFrom(n);
     std::vector<std::uint8_t> hit(n);
     std::vector<std::size_t> hitNow;
+    // Each posed frame's places hit, one after another (frameHitsEnd: where each frame's end).
+    std::vector<std::uint32_t> frameHits, frameHitsEnd;
     const double sameView = std::cos(config_.sameViewAngle_deg * kDegree);
     const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
     const double radius2 = placeRadius_mm_ * placeRadius_mm_;
@@ -277,6 +279,11 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
             for (std::size_t i = 0; i < hitNow.size(); ++i)
                 for (std::size_t j = i + 1; j < hitNow.size(); ++j)
                     ++together[hitNow[i] * n + hitNow[j]];
+            if (pass == 0) {
+                for (const std::size_t k : hitNow)
+                    frameHits.push_back(static_cast<std::uint32_t>(k));
+                frameHitsEnd.push_back(static_cast<std::uint32_t>(frameHits.size()));
+            }
         }
     }
     std::vector<std::size_t> accepted;
@@ -305,6 +312,17 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::vector<Vec3> markers;
     for (const std::size_t k : accepted)
         markers.push_back(place[k]);
+    // The most of its markers seen in one frame.
+    std::vector<std::uint8_t> isAccepted(n, 0);
+    for (const std::size_t k : accepted)
+        isAccepted[k] = 1;
+    body.mostSeenTogether = 0;
+    for (std::size_t f = 0, begin = 0; f < frameHitsEnd.size(); begin = frameHitsEnd[f++]) {
+        std::size_t count = 0;
+        for (std::size_t i = begin; i < frameHitsEnd[f]; ++i)
+            count += isAccepted[frameHits[i]];
+        body.mostSeenTogether = std::max(body.mostSeenTogether, count);
+    }
     // Glimpses: places seen in a few frames, too few for a marker, away from every marker.
     std::vector<Vec3> glimpses;
     for (const std::size_t s : strongestSites(kMinGlimpseFrames, minHits)) {

@@ -734,6 +734,31 @@ SessionBuffer sessionOfOneBody(const std::vector<Vec3>& body, std::size_t frames
     return session;
 }
 
+// A ring of five markers, nearly evenly spaced, never seen more than four at a time (each in turn
+// hidden for a fifth of the session), whose online model holds four of them. Any four of a ring
+// look alike, so S_min of the five is five; asked for five, completion would never find the
+// ring again once it had learnt the fifth marker, and would drop it. It asks for no more markers
+// than were ever seen together.
+TEST(CalibrationCompletion, FindsARingSeenFourAtATimeByFourOfItsMarkers) {
+    std::vector<Vec3> ring;
+    for (const double degrees : {0.0, 73.0, 143.0, 217.0, 289.0})
+        ring.emplace_back(30.0 * std::cos(degrees * std::numbers::pi / 180.0),
+                          30.0 * std::sin(degrees * std::numbers::pi / 180.0), 0.0);
+    const std::size_t frames = 2000;
+    const SessionBuffer session = sessionOfOneBody(
+        ring, frames, 0.05, 6,
+        [&](std::size_t f, const RigidTransform&, std::vector<Vec3>& points) {
+            points.erase(points.begin() + static_cast<std::ptrdiff_t>(f * 5 / frames));
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    const std::vector<Vec3> four(ring.begin(), ring.begin() + 4);
+    ASSERT_EQ(completion.run(session, modelsOf({four}), out), 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), ring.size());
+    EXPECT_LT(layoutError_mm(out[0], ring), 0.02);
+}
+
 // A point that rides along with the body for a while (a marker of something held against it)
 // sits at one place in the body's frame for 0.6 s; the two times the body is later seen from the
 // same directions, it is not there. It is no marker of the body, although a third of the frames
