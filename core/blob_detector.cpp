@@ -1135,19 +1135,28 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         e.jtr(2) += kRadiusPrior * (circle[k].radius - discs[k].radius_px);
         return e;
     };
-    // The change of a disc's place and radius, and the variance of its place per unit of its
-    // points' variance: along its line, or the larger of x and y for a free disc.
-    const auto solve = [&](std::size_t k, const Normal& e, Eigen::Vector3d& change) {
-        if (discs[k].free) {
-            change = e.jtj.ldlt().solve(-e.jtr);
-            const Eigen::Matrix3d inverse = e.jtj.inverse();
-            return std::max(inverse(0, 0), inverse(1, 1));
-        }
+    // A disc on its line has no place across it: its normal equations are those of its place
+    // along the line and its radius.
+    const auto onLineSystem = [](const Normal& e) {
         Eigen::Matrix2d jtj;
         jtj << e.jtj(0, 0), e.jtj(0, 2), e.jtj(2, 0), e.jtj(2, 2);
-        const Eigen::Vector2d onLineChange = jtj.ldlt().solve(-Eigen::Vector2d(e.jtr(0), e.jtr(2)));
-        change = {onLineChange.x(), 0.0, onLineChange.y()};
-        return jtj.inverse()(0, 0);
+        return jtj;
+    };
+    // The change of a disc's place and radius.
+    const auto stepOf = [&](std::size_t k, const Normal& e) {
+        if (discs[k].free)
+            return Eigen::Vector3d(e.jtj.ldlt().solve(-e.jtr));
+        const Eigen::Vector2d change =
+            onLineSystem(e).ldlt().solve(-Eigen::Vector2d(e.jtr(0), e.jtr(2)));
+        return Eigen::Vector3d(change.x(), 0.0, change.y());
+    };
+    // The variance of its place per unit of its points' variance: along its line, or the larger
+    // of x and y for a free disc.
+    const auto placeVariance = [&](std::size_t k, const Normal& e) {
+        if (!discs[k].free)
+            return onLineSystem(e).inverse()(0, 0);
+        const Eigen::Matrix3d inverse = e.jtj.inverse();
+        return std::max(inverse(0, 0), inverse(1, 1));
     };
     for (int pass = 0; pass < 6; ++pass) {
         findOwners();
@@ -1156,8 +1165,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
                 const Normal e = normalOf(k);
                 if (e.n < 5)
                     break; // judged below
-                Eigen::Vector3d change;
-                solve(k, e, change);
+                const Eigen::Vector3d change = stepOf(k, e);
                 if (!change.allFinite())
                     return 0;
                 at[k] += change.x();
@@ -1183,8 +1191,7 @@ std::size_t BlobDetector::splitOnLines(const std::uint8_t* pixels, int stride_by
         // The standard error of the place on the line, from the points' scatter (no less than
         // kLineNoise_px) and how the arc's points constrain it.
         const double spread = std::max(circle[k].rms, kLineNoise_px);
-        Eigen::Vector3d unused;
-        const double placeError = spread * std::sqrt(solve(k, e, unused));
+        const double placeError = spread * std::sqrt(placeVariance(k, e));
         // A free disc that wandered off its start took another disc's arc.
         bool strayed =
             discs[k].free && std::hypot(at[k], across[k]) > kFreeDiscReach * discs[k].radius_px;

@@ -68,6 +68,12 @@ struct Blob {
     }
 };
 
+/// \return whether the bounds of \a blob (with half a pixel about them) hold \a pixel_px.
+inline bool boundsHold(const Blob& blob, const Vec2& pixel_px) {
+    return pixel_px.x() >= blob.left - 0.5 && pixel_px.x() <= blob.right + 0.5 &&
+           pixel_px.y() >= blob.top - 0.5 && pixel_px.y() <= blob.bottom + 0.5;
+}
+
 /// \return whether \a a and \a b are parts of one blob split into discs (they keep its bounds).
 inline bool partsOfOneBlob(const Blob& a, const Blob& b) {
     return a.split && b.split && a.left == b.left && a.top == b.top && a.right == b.right &&

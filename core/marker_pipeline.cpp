@@ -278,22 +278,23 @@ void MarkerPipeline::preferContinuingPairs() {
     }
 }
 
-bool MarkerPipeline::mergedBlobAt(int camera, const Vec2& pixel_px, int& blob) const {
-    const auto holds = [&](const Blob& b) {
-        return pixel_px.x() >= b.left - 0.5 && pixel_px.x() <= b.right + 0.5 &&
-               pixel_px.y() >= b.top - 0.5 && pixel_px.y() <= b.bottom + 0.5;
-    };
+bool MarkerPipeline::mergedBlobAt(int camera, const Vec2& pixel_px, int& blob, Blob* cover) const {
     // Parts of a split blob keep the whole blob's bounds.
     const BoundedVector<Blob>& blobs = blobs_[index(camera)];
     for (std::size_t b = 0; b < blobs.size(); ++b)
-        if (blobs[b].split && holds(blobs[b])) {
+        if (blobs[b].split && boundsHold(blobs[b], pixel_px)) {
             blob = static_cast<int>(b);
+            if (cover != nullptr)
+                *cover = blobs[b];
             return true;
         }
     blob = -1;
     for (const Blob& refused : detectors_[index(camera)].refused())
-        if (holds(refused))
+        if (boundsHold(refused, pixel_px)) {
+            if (cover != nullptr)
+                *cover = refused;
             return true;
+        }
     return false;
 }
 

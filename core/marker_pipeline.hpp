@@ -183,7 +183,8 @@ private:
     Vec3 neighboursStep(std::size_t hidden) const;
     /// Whether the bounds of a blob of several discs of \a camera hold \a pixel_px: a part of a
     /// split blob (its index into \a blob) or a blob detection refused as not round (-1).
-    bool mergedBlobAt(int camera, const Vec2& pixel_px, int& blob) const;
+    /// The covering blob itself into \a cover, when given.
+    bool mergedBlobAt(int camera, const Vec2& pixel_px, int& blob, Blob* cover = nullptr) const;
     /// Triangulate \a blob of \a camera (its index \a at) with \a otherBlob of the other camera
     /// (\a otherAt), whichever camera is camera 0.
     bool pairBlobs(int camera, const Blob& blob, int at, const Blob& otherBlob, int otherAt,

@@ -35,6 +35,10 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
         std::array<bool, 2> placed{};
     };
     FixedVector<Sought, kMaxSoughtMarkers> sought;
+    // The image radius (px) in \a camera of a marker of size \a size_pxmm at \a point_rig_mm.
+    const auto radiusAt = [&](double size_pxmm, const Vec3& point_rig_mm, int camera) {
+        return size_pxmm / (point_rig_mm - stereo_.rig().camera(camera).centre_rig_mm()).norm();
+    };
     // Point last_[i], where it is expected in both images.
     const auto seek = [&](std::size_t i) {
         const LastPoint& last = last_[i];
@@ -59,23 +63,22 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
             if (!pixel)
                 return;
             s.pixel_px[index(camera)] = *pixel;
-            s.radius_px[index(camera)] =
-                last.size_pxmm / (s.expected_rig_mm - model.centre_rig_mm()).norm();
+            s.radius_px[index(camera)] = radiusAt(last.size_pxmm, s.expected_rig_mm, camera);
         }
         sought.push_back(s);
     };
     // Any point that continued one before and that no marker continues now, those missing for a
     // few frames too: the disc is measured where it is, the guess only starts the fit.
-    for (std::size_t i = 0; i < last_.size(); ++i)
-        if (lastContinued_[i] == 0)
-            seek(i);
+    const auto seekLost = [&] {
+        sought.clear();
+        for (std::size_t i = 0; i < last_.size(); ++i)
+            if (lastContinued_[i] == 0)
+                seek(i);
+    };
+    seekLost();
     if (sought.empty())
         return;
 
-    const auto holds = [](const Blob& b, const Vec2& p) {
-        return p.x() >= b.left - 0.5 && p.x() <= b.right + 0.5 && p.y() >= b.top - 0.5 &&
-               p.y() <= b.bottom + 0.5;
-    };
     // A blob that passed as one disc (\a b of \a camera) and holds a sought point within its
     // radius.
     const auto wholeBlobHolds = [&](std::size_t c, std::size_t b, const Vec2& pixel) {
@@ -90,11 +93,10 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
         const int l = continuesLast_[static_cast<std::size_t>(m)];
         if (l < 0 || !(last_[static_cast<std::size_t>(l)].size_pxmm > 0.0))
             return blobs_[c][b].discRadius_px() > kOwnBlobSize * s.radius_px[c]; // a new marker
-        const double range_mm = (markers_[static_cast<std::size_t>(m)].position_rig_mm -
-                                 stereo_.rig().camera(static_cast<int>(c)).centre_rig_mm())
-                                    .norm();
         return blobs_[c][b].discRadius_px() >
-               kOwnBlobSize * last_[static_cast<std::size_t>(l)].size_pxmm / range_mm;
+               kOwnBlobSize * radiusAt(last_[static_cast<std::size_t>(l)].size_pxmm,
+                                       markers_[static_cast<std::size_t>(m)].position_rig_mm,
+                                       static_cast<int>(c));
     };
     FixedVector<int, kMaxSoughtMarkers> wholeMarkers;
     for (const Sought& s : sought)
@@ -112,15 +114,10 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
                     lastStep_[static_cast<std::size_t>(l)] = Vec3::Zero();
                 }
             }
-    if (!wholeMarkers.empty()) {
-        sought.clear();
-        for (std::size_t i = 0; i < last_.size(); ++i)
-            if (lastContinued_[i] == 0)
-                seek(i);
-    }
+    if (!wholeMarkers.empty())
+        seekLost();
 
     // Per camera and sought marker, the whole marker whose blob its disc was placed in.
-    std::array<bool, kMaxSoughtMarkers> wholeOfSought{};
     std::array<std::array<int, kMaxSoughtMarkers>, 2> wholeMarkerOf{};
     for (auto& of : wholeMarkerOf)
         of.fill(kNone);
@@ -128,22 +125,12 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
     for (int camera = 0; camera < 2; ++camera) {
         const std::size_t c = index(camera);
         BoundedVector<Blob>& blobs = blobs_[c];
-        // The blob that may hide a sought marker at \a pixel: parts of a split blob (one of them
-        // into \a at), a blob refused as not round (\a at -1), or a blob that passed as one disc.
+        // The blob that may hide sought marker \a s: parts of a split blob (one of them into
+        // \a at), a blob refused as not round (\a at -1), or a blob that passed as one disc.
         const auto coverAt = [&](const Sought& s, Blob& cover, int& at) {
             const Vec2& pixel = s.pixel_px[c];
-            for (std::size_t b = 0; b < blobs.size(); ++b)
-                if (blobs[b].split && holds(blobs[b], pixel)) {
-                    cover = blobs[b];
-                    at = static_cast<int>(b);
-                    return true;
-                }
-            at = kNone;
-            for (const Blob& refused : detectors_[c].refused())
-                if (holds(refused, pixel)) {
-                    cover = refused;
-                    return true;
-                }
+            if (mergedBlobAt(camera, pixel, at, &cover))
+                return true;
             // A blob that passed as one disc holds several when it is larger than its marker
             // (wholeMarkers) or, without one, than the marker sought in it.
             for (std::size_t b = 0; b < blobs.size(); ++b) {
@@ -197,7 +184,7 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
             const std::size_t members = count;
             for (std::size_t k = first; k < sought.size() && count < kMaxDiscs; ++k) {
                 Sought& s = sought[k];
-                if (s.blob[c] != kNone || !holds(target, s.pixel_px[c]))
+                if (s.blob[c] != kNone || !boundsHold(target, s.pixel_px[c]))
                     continue;
                 s.blob[c] = kNoBlob; // fitted now, placed or not
                 discs[count].start_px = s.pixel_px[c];
@@ -233,10 +220,8 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
                 markerOfBlob_[c][blobs.size() - 1] = kNone;
                 s.blob[c] = static_cast<int>(blobs.size() - 1);
                 s.placed[c] = true;
-                if (whole >= 0) {
+                if (whole >= 0)
                     wholeMarkerOf[c][soughtOf[k]] = whole;
-                    wholeOfSought[soughtOf[k]] = true;
-                }
                 added = true;
             }
             // With a disc found in it, each part is centred anew; its marker follows when it
@@ -284,11 +269,12 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
         if (!pairBlobs(0, s.blob[0], s.blob[1], marker) ||
             (marker.position_rig_mm - s.expected_rig_mm).norm() > reach_mm)
             continue;
+        const bool inWholeBlob = wholeMarkerOf[0][k] >= 0 || wholeMarkerOf[1][k] >= 0;
         bool taken = false;
         for (std::size_t m = 0; m < markers_.size(); ++m)
             taken = taken ||
                     ((markers_[m].position_rig_mm - marker.position_rig_mm).norm() <= reach_mm &&
-                     !(wholeOfSought[k] && m < before && goes(m)));
+                     !(inWholeBlob && m < before && goes(m)));
         if (taken)
             continue;
         for (const auto& of : wholeMarkerOf)
