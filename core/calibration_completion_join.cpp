@@ -218,6 +218,27 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                     return std::nullopt;
                 };
                 const Consensus lone = consensus(true);
+                // Whether the two were found alone at once, in many frames, in places that do
+                // not overlap and at a relative pose unlike \a tie: two objects in view
+                // together, whose layouts only look alike. (Pieces of one self-similar body found
+                // alone lie on each other's points: their wrong relative poses overlap.)
+                auto seenApartFrom = [&](const RigidTransform& tie) {
+                    const Extent intoBall = extentOf(into.markers_mm);
+                    std::size_t apart = 0;
+                    for (std::size_t k = 0; k < sharedFrames.size(); ++k) {
+                        const std::size_t f = sharedFrames[k];
+                        const double centres_mm =
+                            (into.T_rig_from_body_alone[f].apply(intoBall.centre) -
+                             from.T_rig_from_body_alone[f].apply(ball.centre))
+                                .norm();
+                        apart += centres_mm > intoBall.radius_mm + ball.radius_mm &&
+                                         disagreement_mm(relative[k], tie, ball) >
+                                             config_.sameBodyTolerance_mm
+                                     ? 1U
+                                     : 0U;
+                    }
+                    return apart >= config_.minSharedFrames;
+                };
                 // The ties below are likenesses of layout, with no frame that poses both pieces.
                 // One is taken only for pieces not found alone together often (those found so
                 // that did not move as one are not tied by a likeness), and only when the body the
@@ -257,7 +278,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 else if ((T_into_from_from = tiedByTracks(into, from)) &&
                          movesOnSmoothly(session, into, from, *T_into_from_from))
                     ++counters_.joinedByTracks;
-                else if ((T_into_from_from = layoutPlacement()))
+                else if ((T_into_from_from = layoutPlacement()) &&
+                         !seenApartFrom(*T_into_from_from))
                     ++counters_.joinedByLayout;
                 else if ((T_into_from_from =
                               tieByLikeness([&] { return glimpsedPlacement(false); })))
