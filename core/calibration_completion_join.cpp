@@ -218,26 +218,12 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                     return std::nullopt;
                 };
                 const Consensus lone = consensus(true);
-                // Whether the two were found alone at once, in many frames, in places that do
-                // not overlap and at a relative pose unlike \a tie: two objects in view
-                // together, whose layouts only look alike. (Pieces of one self-similar body found
-                // alone lie on each other's points: their wrong relative poses overlap.)
+                // Found alone at once, in many frames, apart and not where the tie puts them:
+                // two objects in view together, whose layouts only look alike.
                 auto seenApartFrom = [&](const RigidTransform& tie) {
-                    const Extent intoBall = extentOf(into.markers_mm);
-                    std::size_t apart = 0;
-                    for (std::size_t k = 0; k < sharedFrames.size(); ++k) {
-                        const std::size_t f = sharedFrames[k];
-                        const double centres_mm =
-                            (into.T_rig_from_body_alone[f].apply(intoBall.centre) -
-                             from.T_rig_from_body_alone[f].apply(ball.centre))
-                                .norm();
-                        apart += centres_mm > intoBall.radius_mm + ball.radius_mm &&
-                                         disagreement_mm(relative[k], tie, ball) >
-                                             config_.sameBodyTolerance_mm
-                                     ? 1U
-                                     : 0U;
-                    }
-                    return apart >= config_.minSharedFrames;
+                    return framesSeenApart(into.T_rig_from_body_alone, from.T_rig_from_body_alone,
+                                           sharedFrames, extentOf(into.markers_mm), ball, tie,
+                                           config_.sameBodyTolerance_mm) >= config_.minSharedFrames;
                 };
                 // The ties below are likenesses of layout, with no frame that poses both pieces.
                 // One is taken only for pieces not found alone together often (those found so

@@ -56,6 +56,23 @@ double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const E
            ball.radius_mm * rotationAngleBetween_rad(a.rotation, b.rotation);
 }
 
+std::size_t framesSeenApart(std::span<const RigidTransform> T_rig_from_a,
+                            std::span<const RigidTransform> T_rig_from_b,
+                            std::span<const std::size_t> frames, const Extent& ballA,
+                            const Extent& ballB, const RigidTransform& T_a_from_b,
+                            double tolerance_mm) {
+    std::size_t apart = 0;
+    for (const std::size_t f : frames) {
+        const double centres_mm =
+            (T_rig_from_a[f].apply(ballA.centre) - T_rig_from_b[f].apply(ballB.centre)).norm();
+        if (centres_mm <= ballA.radius_mm + ballB.radius_mm)
+            continue;
+        const RigidTransform relative = T_rig_from_a[f].inverse() * T_rig_from_b[f];
+        apart += disagreement_mm(relative, T_a_from_b, ballB) > tolerance_mm ? 1U : 0U;
+    }
+    return apart;
+}
+
 std::optional<RigidFit> fitDroppingWorst(std::vector<Vec3>& from, std::vector<Vec3>& to,
                                          double tolerance_mm) {
     while (from.size() >= 3) {

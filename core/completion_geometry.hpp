@@ -31,6 +31,21 @@ Extent extentOf(std::span<const Vec3> markers_mm);
 /// How far apart two transforms put the points of a ball (centre, radius): an upper bound (mm).
 double disagreement_mm(const RigidTransform& a, const RigidTransform& b, const Extent& ball);
 
+/**
+ * \brief How many of \a frames show two bodies as two objects: both found there (\a T_rig_from_a,
+ * \a T_rig_from_b, indexed by frame), in places that do not overlap (their balls' centres farther
+ * apart than the two radii), at a relative pose that \a T_a_from_b misses by more than
+ * \a tolerance_mm (disagreement_mm over \a ballB).
+ *
+ * Two pieces of one body found at once sit where the tie puts them; a piece of a self-similar
+ * body taken for another part of it lies on that part's points, so the two overlap.
+ */
+std::size_t framesSeenApart(std::span<const RigidTransform> T_rig_from_a,
+                            std::span<const RigidTransform> T_rig_from_b,
+                            std::span<const std::size_t> frames, const Extent& ballA,
+                            const Extent& ballB, const RigidTransform& T_a_from_b,
+                            double tolerance_mm);
+
 /// \brief The rigid fit of \a from onto \a to (paired by index), the pair farthest off it
 /// dropped from both while any lies more than \a tolerance_mm off: points of something else
 /// among a body's. Nothing when fewer than three pairs are left or they lie on one line; \a from

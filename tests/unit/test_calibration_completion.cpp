@@ -256,6 +256,41 @@ TEST(TrianglesByLongestSide, MarkAlikeMarksWhatEveryPairComparedMarks) {
     }
 }
 
+// Two objects found at once, each moving its own way 150 mm apart, show themselves as two in
+// every frame, whatever a likeness of layout would tie them by; two pieces of one body found at
+// once, apart or on each other's points, never do.
+TEST(FramesSeenApart, CountsFramesThatShowTwoObjectsNotTwoPiecesOfOne) {
+    const completion_detail::Extent ballA{Vec3(0.0, 0.0, 0.0), 30.0};
+    const completion_detail::Extent ballB{Vec3(5.0, 0.0, 0.0), 25.0};
+    RigidTransform tie;
+    tie.rotation = Quat(Eigen::AngleAxisd(0.7, Vec3(0.2, 1.0, 0.1).normalized()));
+    tie.translation_mm = Vec3(80.0, -10.0, 5.0);
+    std::vector<RigidTransform> poseA, poseB, pieceB, selfSimilarB;
+    std::vector<std::size_t> frames;
+    for (std::size_t f = 0; f < 200; ++f) {
+        const double t_s = static_cast<double>(f) / 100.0;
+        poseA.push_back(turning(t_s, Vec3(-75.0, 0.0, 600.0), 0.0));
+        poseB.push_back(turning(t_s, Vec3(75.0, 0.0, 600.0), 1.3, Vec3::UnitX()));
+        pieceB.push_back(poseA.back() * tie);
+        // Taken for another part of the body: turned about the body's centre, on its points.
+        RigidTransform turned;
+        turned.rotation = Quat(Eigen::AngleAxisd(1.2, Vec3::UnitZ()));
+        selfSimilarB.push_back(poseA.back() * turned);
+        frames.push_back(f);
+    }
+    EXPECT_EQ(completion_detail::framesSeenApart(poseA, poseB, frames, ballA, ballB, tie, 2.0),
+              frames.size());
+    EXPECT_EQ(completion_detail::framesSeenApart(poseA, pieceB, frames, ballA, ballB, tie, 2.0),
+              0U);
+    EXPECT_EQ(
+        completion_detail::framesSeenApart(poseA, selfSimilarB, frames, ballA, ballB, tie, 2.0),
+        0U);
+    // Only the frames asked about count.
+    EXPECT_EQ(completion_detail::framesSeenApart(poseA, poseB, std::span(frames).first(7), ballA,
+                                                 ballB, tie, 2.0),
+              7U);
+}
+
 // Views that share three markers off one line fix each other; two shared markers, or three on
 // one line, leave one view free to turn about that line.
 TEST(RigidGroups, TiesViewsThatShareThreeMarkersOffOneLine) {
