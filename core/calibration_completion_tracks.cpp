@@ -186,6 +186,11 @@ std::optional<RigidTransform> CalibrationCompletion::tiedByTracks(const Body& a,
     const std::optional<RigidFit> fit = fitDroppingWorst(from, to, kTrackTieTolerance_mm);
     if (!fit || widestTriangleHeight_mm(from) < kMinTieHeight_mm)
         return std::nullopt;
+    // Three tracks fit whatever three places of like sides they are: a track that jumped to a
+    // marker as far from the other two as the one it left ties the pieces turned about them.
+    // With nothing to check it against, the tie must agree as closely as layouts are known.
+    if (from.size() == 3 && fit->rms_mm > kTriangleTie.precision_mm)
+        return std::nullopt;
     return fit->transform;
 }
 
