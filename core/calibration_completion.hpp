@@ -47,6 +47,11 @@ struct CompletionConfig {
     double sameViewAngle_deg = 8.0;
     /// Points farther than this from an object's markers are not looked at for it (mm).
     double reach_mm = 60.0;
+    /// Places (markers yet to be learnt) are looked for this far beyond the farthest known
+    /// marker from the object's centre (mm): the markers first learnt of a large plate may all
+    /// lie at one end of it. Points of other objects within it are kept out by their own poses
+    /// and by the places' tests (seen whenever the cameras look that way again).
+    double placeReach_mm = 120.0;
     /// Places looked at per object and round (more are refused and counted).
     std::size_t maxSites = 65536;
     /// Rounds of tracking, joining and re-measuring; it stops earlier once nothing changes.

@@ -129,7 +129,7 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     std::fill(cellHead_.begin(), cellHead_.end(), -1);
 
     const Extent extent = extentOf(body.markers_mm);
-    const double reach = extent.radius_mm + config_.reach_mm;
+    const double reach = extent.radius_mm + config_.placeReach_mm;
     const double reach2 = reach * reach;
     // A point on a marker of another object found in the same frame is that object's: markers of
     // one that sat still against this one for a while (objects turning slowly side by side) are

@@ -369,6 +369,22 @@ TEST(CalibrationCompletion, CompletesAModelFromAPieceOfIt) {
     EXPECT_EQ(completion.counters().markersAdded, 7U);
 }
 
+// The markers first learnt of a long bar may all lie at one end of it: its other two, 95 and 110
+// mm from them (too few to be found as a body of their own and joined), are learnt too, as an
+// object's unknown markers are looked for well beyond its known ones.
+TEST(CalibrationCompletion, LearnsTheFarEndOfALongBarFromAPieceAtOneEnd) {
+    const std::vector<Vec3> body{
+        Vec3(0.0, 0.0, 0.0),  Vec3(15.0, 3.0, 2.0),  Vec3(4.0, 16.0, -3.0), Vec3(12.0, 10.0, 12.0),
+        Vec3(-8.0, 6.0, 9.0), Vec3(100.0, 5.0, 0.0), Vec3(112.0, -6.0, 8.0)};
+    const SessionBuffer session = sessionOf({body}, 10.0, 0.05, 3);
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 5)}), out), 1U);
+    EXPECT_EQ(completion.counters().markersAdded, 2U);
+    EXPECT_LT(layoutError_mm(out[0], body), 0.05);
+}
+
 TEST(CalibrationCompletion, JoinsTwoPiecesOfOneBody) {
     const std::vector<Vec3> body = test::irregularLayout(12, 8, 15.0);
     const SessionBuffer session = sessionOf({body}, 10.0, 0.05, 2);
