@@ -219,7 +219,8 @@ bool CalibrationCompletion::joinBodies(const SessionBuffer& session) {
                 };
                 const Consensus lone = consensus(true);
                 // Found alone at once, in many frames, apart and not where the tie puts them:
-                // two objects in view together, whose layouts only look alike.
+                // two objects in view together, whose layouts only look alike. (sharedFrames
+                // holds the frames consensus(true) just listed; nothing below refills it.)
                 auto seenApartFrom = [&](const RigidTransform& tie) {
                     return framesSeenApart(into.T_rig_from_body_alone, from.T_rig_from_body_alone,
                                            sharedFrames, extentOf(into.markers_mm), ball, tie,
