@@ -30,6 +30,8 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , lastContinued_(config.stereo.maxMarkers)
     , lastStep_(config.stereo.maxMarkers)
     , continuesLast_(config.stereo.maxMarkers)
+    , unpairedRays_{BoundedVector<UnpairedRay>(config.blobs.maxBlobs),
+                    BoundedVector<UnpairedRay>(config.blobs.maxBlobs)}
     , markerOfBlob_{std::make_unique<int[]>(config.blobs.maxBlobs),
                     std::make_unique<int[]>(config.blobs.maxBlobs)} {
     if (rig.camera(1).intrinsics().width_px != width_px_ ||
@@ -338,6 +340,18 @@ void MarkerPipeline::noteContinuedPoints() {
 void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) {
     const double reach_mm = config_.stereo.continuity_mm;
     const std::size_t before = markers_.size();
+    // The rays of the blobs without a partner, from their centres now: stereo prepared none for
+    // the parts that the splits added after it ran, and a part centred anew has left its own.
+    for (int camera = 0; camera < 2; ++camera) {
+        BoundedVector<UnpairedRay>& rays = unpairedRays_[index(camera)];
+        rays.clear();
+        const BoundedVector<Blob>& blobs = blobs_[index(camera)];
+        for (std::size_t u = 0; u < blobs.size(); ++u)
+            if (markerOfBlob_[index(camera)][u] < 0)
+                if (const std::optional<Ray> ray =
+                        stereo_.rig().camera(camera).ray(blobs[u].centre_px))
+                    rays.push_back({static_cast<int>(u), *ray});
+    }
     for (std::size_t i = 0; i < last_.size(); ++i) {
         const LastPoint& last = last_[i];
         // A point missing from the last frame is not carried: where it is now is a guess from
@@ -352,10 +366,9 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
         int bestCamera = -1, bestBlob = -1;
         Vec3 bestPoint_rig_mm = Vec3::Zero();
         for (int camera = 0; camera < 2; ++camera)
-            forEachUnpaired(camera, [&](int u, const Vec2&) {
-                Ray ray;
-                Vec2 unused;
-                stereo_.preparedBlob(camera, u, ray, unused);
+            for (const auto& [u, ray] : unpairedRays_[index(camera)]) {
+                if (markerOfBlob_[index(camera)][static_cast<std::size_t>(u)] >= 0)
+                    continue; // carried on already
                 const double along_mm =
                     (expected_rig_mm - ray.origin_rig_mm).dot(ray.direction_rig);
                 const Vec3 onRay_rig_mm = ray.origin_rig_mm + along_mm * ray.direction_rig;
@@ -366,7 +379,7 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
                     bestBlob = u;
                     bestPoint_rig_mm = onRay_rig_mm;
                 }
-            });
+            }
         if (bestCamera < 0 || markers_.size() == markers_.capacity())
             continue;
         // Hidden in the other image: a blob of several discs (and, given the image, a lit pixel)

@@ -297,6 +297,13 @@ private:
     BoundedVector<Vec3> lastStep_;
     /// Per marker of this frame, the point of the last frame it continues (-1: none).
     BoundedVector<int> continuesLast_;
+    /// A blob without a partner and its ray (rig frame) from its centre now, for
+    /// carryHiddenMarkers().
+    struct UnpairedRay {
+        int blob = -1;
+        Ray ray;
+    };
+    std::array<BoundedVector<UnpairedRay>, 2> unpairedRays_;
     /// Points this near (mm) a hidden one share its motion (neighboursStep()): an object's
     /// markers lie within a few centimetres of each other. 100 mm took in other objects' steps
     /// (stress: 7 carried points 3-6 mm off, none with 40).
