@@ -36,8 +36,10 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
     const double tol = config_.triangleTolerance_mm;
     const double apart = config_.triangleUniqueness * tol;
 
-    // The triangles of every alive body; a body's that no other triangle resembles are the ones
-    // three points can stand for. Resembles by a wider margin than a match needs: where a layout's
+    // The triangles of every alive body; a body's that no other of its own resembles are the ones
+    // three points can stand for, where the few other bodies with a triangle like it are found
+    // elsewhere (a box of 32 markers has a triangle like nearly any of a small body's, and is in
+    // view most of the session). Resembles by a wider margin than a match needs: where a layout's
     // triangles come close to each other (markers evenly spaced on a ring), the triangles of its
     // markers not yet learnt come as close, and three of those would pose it wrongly.
     std::vector<SortedTriangle> all;
@@ -47,8 +49,16 @@ void CalibrationCompletion::poseFromTriangles(const SessionBuffer& session) {
     markAlike(all, apart);
     std::sort(all.begin(), all.end(), shorterLongestSide);
     std::vector<TriangleJob> ofBody(bodies_.size());
+    // Like a triangle of a body not known to be another object (seen moving apart from this one):
+    // never this body's alone. A piece of its own object with a like triangle tells that the
+    // object is like itself (a box's faces), and three points of its other faces would pose it.
+    const auto likeAPiece = [&](const SortedTriangle& t) {
+        return std::any_of(
+            t.alikeBodies.begin(), t.alikeBodies.begin() + t.alikeCount,
+            [&](std::uint32_t o) { return !bodies_[t.body].isApartFrom(bodies_[o].id); });
+    };
     for (const SortedTriangle& t : all)
-        if (t.unique && wellShaped(t, tol))
+        if (t.unique && wellShaped(t, tol) && !likeAPiece(t))
             ofBody[t.body].own.push_back(t);
     std::vector<TriangleJob> jobs;
     for (std::size_t index = 0; index < bodies_.size(); ++index)
@@ -170,6 +180,37 @@ void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
         const Vec3 viewpoint = T_rig_from_body.inverse().apply(config_.viewpoint_rig_mm);
         return seenFromNear(job.seenFrom[m], (viewpoint - marker).normalized(), sameView);
     };
+    // Three points match a triangle like another object's: that object's, unless it is found in
+    // this frame and they are not its markers there. Which of the frame's points lie on a body's
+    // markers is found once, when first asked.
+    std::vector<std::size_t> onBodyOf;
+    std::vector<std::uint8_t> onBody;
+    auto onMarkersOf = [&](std::size_t b) -> const std::uint8_t* {
+        const auto known = std::find(onBodyOf.begin(), onBodyOf.end(), b);
+        if (known != onBodyOf.end())
+            return onBody.data() + static_cast<std::size_t>(known - onBodyOf.begin()) * free.size();
+        onBodyOf.push_back(b);
+        onBody.resize(onBodyOf.size() * free.size(), 0);
+        std::uint8_t* on = onBody.data() + (onBodyOf.size() - 1) * free.size();
+        const Body& other = bodies_[b];
+        for (const Vec3& m : other.markers_mm) {
+            const Vec3 there = other.T_rig_from_body[f].apply(m);
+            for (std::size_t p = 0; p < free.size(); ++p)
+                on[p] = on[p] || (free[p] - there).squaredNorm() <= radius * radius;
+        }
+        return on;
+    };
+    auto anotherBodys = [&](const SortedTriangle& own, const SortedTriangle& seen) {
+        for (std::uint32_t k = 0; k < own.alikeCount; ++k) {
+            const Body& other = bodies_[own.alikeBodies[k]];
+            if (!other.posed[f])
+                return true;
+            const std::uint8_t* on = onMarkersOf(own.alikeBodies[k]);
+            if (on[seen.corners[0]] && on[seen.corners[1]] && on[seen.corners[2]])
+                return true;
+        }
+        return false;
+    };
     // Every triple of points that stands for one triangle of a body: the pose that puts the
     // most markers on points wins; two different poses that do equally well, none.
     struct Choice {
@@ -183,7 +224,7 @@ void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
              owned.within(seen.sides_mm[2] - tol, seen.sides_mm[2] + tol)) {
             TriangleJob& job = jobs[own.body];
             const Body& body = *job.body;
-            if (body.posed[f] || !congruent(own, seen, tol))
+            if (body.posed[f] || !congruent(own, seen, tol) || anotherBodys(own, seen))
                 continue;
             const std::array<Vec3, 3> from = {body.markers_mm[own.corners[0]],
                                               body.markers_mm[own.corners[1]],

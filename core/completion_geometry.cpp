@@ -319,9 +319,19 @@ void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm) {
         SortedTriangle& t = triangles[i];
         const std::size_t cell = cellOf(t);
         for (std::size_t l = cell - row; l <= cell + row && t.unique; l += row)
-            for (std::size_t k = cellStart[l - 1]; k < cellStart[l + 2] && t.unique; ++k)
-                if (inCell[k] != i && congruent(t, triangles[inCell[k]], tolerance_mm))
+            for (std::size_t k = cellStart[l - 1]; k < cellStart[l + 2] && t.unique; ++k) {
+                const SortedTriangle& other = triangles[inCell[k]];
+                if (inCell[k] == i || !congruent(t, other, tolerance_mm))
+                    continue;
+                const auto body = static_cast<std::uint32_t>(other.body);
+                const auto listed = t.alikeBodies.begin() + t.alikeCount;
+                const bool known = std::find(t.alikeBodies.begin(), listed, body) != listed;
+                if (other.body == t.body ||
+                    (!known && t.alikeCount == SortedTriangle::kMaxAlikeBodies))
                     t.unique = false;
+                else if (!known)
+                    t.alikeBodies[t.alikeCount++] = body;
+            }
     }
 }
 

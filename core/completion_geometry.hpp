@@ -150,11 +150,17 @@ bool sameLayout(const MarkerModel& a, const MarkerModel& b);
 /// Three markers or points, their corners ordered by the side facing each, shortest first (mm):
 /// two congruent scalene triangles list their corresponding corners in the same order.
 struct SortedTriangle {
+    /// Other bodies a triangle may be alike to and still stand for its own (markAlike()).
+    static constexpr std::size_t kMaxAlikeBodies = 4;
+
     std::array<double, 3> sides_mm{};
     std::array<std::uint32_t, 3> corners{};
-    /// Whose markers they are, and whether no other triangle of any body has the same sides.
+    /// Whose markers they are, and whether it stands for them: no other triangle of its own body
+    /// has the same sides, and those of at most kMaxAlikeBodies other bodies do (alikeBodies).
     std::size_t body = 0;
     bool unique = true;
+    std::array<std::uint32_t, kMaxAlikeBodies> alikeBodies{};
+    std::uint32_t alikeCount = 0;
 };
 
 /// The triangle of \a a, \a b, \a c, whose indices are \a ia, \a ib, \a ic.
@@ -182,10 +188,12 @@ inline std::size_t sideBin(double side_mm, double perBin) {
     return bin > 0.0 ? static_cast<std::size_t>(bin) : 0;
 }
 
-/// Sets SortedTriangle::unique to false on each of \a triangles that another of them is congruent
-/// to within \a tolerance_mm. Looks only among triangles whose longest and middle sides lie in
-/// the same or neighbouring bins of that width: a scan by longest side alone compared each of
-/// the bodies' ten thousands of triangles with hundreds.
+/// Marks each of \a triangles that another of them is congruent to within \a tolerance_mm: one
+/// of its own body makes it not SortedTriangle::unique, one of another body lists that body in
+/// SortedTriangle::alikeBodies (more than kMaxAlikeBodies such bodies make it not unique either).
+/// Looks only among triangles whose longest and middle sides lie in the same or neighbouring bins
+/// of that width: a scan by longest side alone compared each of the bodies' ten thousands of
+/// triangles with hundreds.
 void markAlike(std::span<SortedTriangle> triangles, double tolerance_mm);
 
 /**

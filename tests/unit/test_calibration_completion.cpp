@@ -5,6 +5,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <set>
 #include <tuple>
 #include <vector>
 
@@ -225,8 +226,9 @@ TEST(TrianglesByLongestSide, FindsWhatAScanOfEveryTriangleFinds) {
     EXPECT_TRUE(completion_detail::TrianglesByLongestSide({}, width).within(0.0, 1e9).empty());
 }
 
-// The triangle step poses a body only by triangles no other one is like; markAlike must find
-// every such likeness that a comparison of every pair finds, and no other.
+// The triangle step poses a body only by triangles no other of its own is like, and knows which
+// other bodies have one like it; markAlike must find every such likeness that a comparison of
+// every pair finds, and no other.
 TEST(TrianglesByLongestSide, MarkAlikeMarksWhatEveryPairComparedMarks) {
     using completion_detail::SortedTriangle;
     std::mt19937 random(11);
@@ -238,22 +240,39 @@ TEST(TrianglesByLongestSide, MarkAlikeMarksWhatEveryPairComparedMarks) {
             layout.emplace_back(coordinate(random), coordinate(random), coordinate(random));
         completion_detail::appendTriangles(layout, body, triangles);
     }
+    std::size_t alikeOthers = 0;
     for (const double tolerance : {0.3, 3.0}) {
         std::vector<SortedTriangle> marked = triangles;
         completion_detail::markAlike(marked, tolerance);
         std::size_t alike = 0;
         for (std::size_t i = 0; i < triangles.size(); ++i) {
             bool expected = true;
-            for (std::size_t j = 0; j < triangles.size() && expected; ++j)
-                expected =
-                    j == i || !completion_detail::congruent(triangles[i], triangles[j], tolerance);
+            std::set<std::uint32_t> others;
+            for (std::size_t j = 0; j < triangles.size(); ++j) {
+                if (j == i || !completion_detail::congruent(triangles[i], triangles[j], tolerance))
+                    continue;
+                if (triangles[j].body == triangles[i].body)
+                    expected = false;
+                else
+                    others.insert(static_cast<std::uint32_t>(triangles[j].body));
+            }
             ASSERT_EQ(marked[i].unique, expected) << i << " at " << tolerance << " mm";
             alike += expected ? 0U : 1U;
+            if (!expected)
+                continue;
+            const std::set<std::uint32_t> listed(marked[i].alikeBodies.begin(),
+                                                 marked[i].alikeBodies.begin() +
+                                                     marked[i].alikeCount);
+            ASSERT_EQ(listed, others) << i << " at " << tolerance << " mm";
+            ASSERT_EQ(marked[i].alikeCount, others.size());
+            alikeOthers += others.empty() ? 0U : 1U;
         }
         // Both kinds occur, or the comparison shows nothing.
         EXPECT_GT(alike, 0U);
         EXPECT_LT(alike, triangles.size());
     }
+    // And at the wider tolerance, triangles like another body's only.
+    EXPECT_GT(alikeOthers, 0U);
 }
 
 // Two objects found at once, each moving its own way 150 mm apart, show themselves as two in
@@ -678,6 +697,45 @@ TEST(CalibrationCompletion, PosesAPieceFromThreeOfItsMarkersAndLearnsAMarkerSeen
     ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 6)}), out), 1U);
     EXPECT_GT(completion.counters().framesFromTriangles, 0U);
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
+// The same piece beside another object, in view all the time and moving its own way, that has a
+// triangle like the piece's three: three points like it are the other object's only where that
+// object is, and it is found elsewhere in every frame, so they pose the piece.
+TEST(CalibrationCompletion, PosesAPieceByATriangleLikeOneOfAnObjectFoundElsewhere) {
+    const std::vector<Vec3> body = test::irregularLayout(7, 13, 15.0);
+    // The other object's own markers lie far from each other and from its copy of the triangle
+    // (as in KeepsTwoObjectsWithALikeTriangleApart).
+    std::vector<Vec3> other{Vec3(0.0, 0.0, 200.0), Vec3(190.0, 25.0, 210.0),
+                            Vec3(60.0, 205.0, 245.0), Vec3(-120.0, 140.0, 260.0)};
+    RigidTransform copied;
+    copied.rotation = Quat(Eigen::AngleAxisd(0.8, Vec3(1.0, 0.3, 0.0).normalized()));
+    copied.translation_mm = Vec3(20.0, -70.0, 30.0);
+    for (std::size_t m = 0; m < 3; ++m)
+        other.push_back(copied.apply(body[m]));
+    const CompletionConfig config;
+    // The condition of the scene: the other object has the piece's triangle.
+    using completion_detail::sortedTriangle;
+    ASSERT_TRUE(completion_detail::congruent(sortedTriangle(body[0], body[1], body[2], 0, 1, 2),
+                                             sortedTriangle(other[4], other[5], other[6], 4, 5, 6),
+                                             config.triangleTolerance_mm));
+    const SessionBuffer session =
+        sessionWhere({body, other}, 10.0, 0.05, 12, [](std::size_t b, std::size_t m, double t) {
+            if (b == 1)
+                return true;
+            if (t < 4.0)
+                return m < 6;
+            const bool newOneShows = static_cast<int>(t / 0.2) % 2 == 0;
+            return t >= 5.0 && (m < 3 || (m == 6 && newOneShows));
+        });
+    CalibrationCompletion completion(config);
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 6), other}), out), 2U);
+    EXPECT_GT(completion.counters().framesFromTriangles, 0U);
+    // Both have seven markers; which model is which does not matter.
+    const bool pieceFirst = layoutError_mm(out[0], body) < layoutError_mm(out[1], body);
+    EXPECT_LT(layoutError_mm(out[pieceFirst ? 0 : 1], body), 0.1);
+    EXPECT_LT(layoutError_mm(out[pieceFirst ? 1 : 0], other), 0.1);
 }
 
 // A body the online stage made no model of (no seed at all) is found in the session's points as a
