@@ -666,6 +666,15 @@ TEST(CalibrationCompletion, KeepsTwoObjectsWithALikeTriangleApart) {
     EXPECT_LT(layoutError_mm(out[1], b), 0.1);
 }
 
+// Markers 0-5 of a body until 4 s; from 5 s markers 0-2, and marker 6 every other fifth of a
+// second.
+bool threeAndANewOne(std::size_t m, double t) {
+    if (t < 4.0)
+        return m < 6;
+    const bool newOneShows = static_cast<int>(t / 0.2) % 2 == 0;
+    return t >= 5.0 && (m < 3 || (m == 6 && newOneShows));
+}
+
 // A piece of a body that is later seen only by three of its markers, and beside them, every
 // other fifth of a second, a marker it has never been seen with: the tracker needs four of a
 // model's markers to find it, and never more than four points are in view, too few to be found as
@@ -686,12 +695,8 @@ TEST(CalibrationCompletion, PosesAPieceFromThreeOfItsMarkersAndLearnsAMarkerSeen
                                        config.triangleUniqueness * config.triangleTolerance_mm));
             }
     const SessionBuffer session =
-        sessionWhere({body}, 10.0, 0.05, 12, [](std::size_t, std::size_t m, double t) {
-            if (t < 4.0)
-                return m < 6;
-            const bool newOneShows = static_cast<int>(t / 0.2) % 2 == 0;
-            return t >= 5.0 && (m < 3 || (m == 6 && newOneShows));
-        });
+        sessionWhere({body}, 10.0, 0.05, 12,
+                     [](std::size_t, std::size_t m, double t) { return threeAndANewOne(m, t); });
     CalibrationCompletion completion(config);
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 6)}), out), 1U);
@@ -721,12 +726,7 @@ TEST(CalibrationCompletion, PosesAPieceByATriangleLikeOneOfAnObjectFoundElsewher
                                              config.triangleTolerance_mm));
     const SessionBuffer session =
         sessionWhere({body, other}, 10.0, 0.05, 12, [](std::size_t b, std::size_t m, double t) {
-            if (b == 1)
-                return true;
-            if (t < 4.0)
-                return m < 6;
-            const bool newOneShows = static_cast<int>(t / 0.2) % 2 == 0;
-            return t >= 5.0 && (m < 3 || (m == 6 && newOneShows));
+            return b == 1 || threeAndANewOne(m, t);
         });
     CalibrationCompletion completion(config);
     std::vector<MarkerModel> out = outputModels(config);
