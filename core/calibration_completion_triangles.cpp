@@ -185,6 +185,7 @@ void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
     // markers is found once, when first asked.
     std::vector<std::size_t> onBodyOf;
     std::vector<std::uint8_t> onBody;
+    std::vector<Vec3> markersThere;
     auto onMarkersOf = [&](std::size_t b) -> const std::uint8_t* {
         const auto known = std::find(onBodyOf.begin(), onBodyOf.end(), b);
         if (known != onBodyOf.end())
@@ -193,11 +194,11 @@ void CalibrationCompletion::poseFromTriangles(std::span<const Vec3> free,
         onBody.resize(onBodyOf.size() * free.size(), 0);
         std::uint8_t* on = onBody.data() + (onBodyOf.size() - 1) * free.size();
         const Body& other = bodies_[b];
-        for (const Vec3& m : other.markers_mm) {
-            const Vec3 there = other.T_rig_from_body[f].apply(m);
-            for (std::size_t p = 0; p < free.size(); ++p)
-                on[p] = on[p] || (free[p] - there).squaredNorm() <= radius * radius;
-        }
+        markersThere.clear();
+        for (const Vec3& m : other.markers_mm)
+            markersThere.push_back(other.T_rig_from_body[f].apply(m));
+        for (std::size_t p = 0; p < free.size(); ++p)
+            on[p] = nearAny(markersThere, free[p], radius * radius) ? 1 : 0;
         return on;
     };
     auto anotherBodys = [&](const SortedTriangle& own, const SortedTriangle& seen) {
