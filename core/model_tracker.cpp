@@ -115,6 +115,7 @@ ModelTracker::ModelTracker(std::span<const MarkerModel> models, const ModelTrack
 
     frame_.owner.assign(config.maxPoints, -1);
     frame_.explained.assign(config.maxPoints, 0);
+    frame_.seeded.assign(config.maxPoints, 0);
     match_.claimant.assign(config.maxPoints, -1);
     match_.claimDistance.assign(config.maxPoints, 0.0);
     frame_.nearby.assign(config.maxPoints, 0);
@@ -489,6 +490,7 @@ void ModelTracker::search(std::size_t body, double time_s) {
         frame_.distancesReady = true;
     }
     std::fill_n(frame_.explained.begin(), frame_.count, std::uint8_t{0});
+    std::fill_n(frame_.seeded.begin(), frame_.count, std::uint8_t{0});
     match_.refusedCount = 0;
     match_.refusedNext = 0;
     Hypothesis best;
@@ -500,7 +502,11 @@ void ModelTracker::search(std::size_t body, double time_s) {
             ++counters_.searchesSkipped;
             break;
         }
-        searchFrom(body, p, time_s, best, haveBest);
+        const std::uint64_t overflowBefore = counters_.candidateOverflow;
+        const bool enumerated = searchFrom(body, p, time_s, best, haveBest);
+        // Every clique holding p was looked at from p, unless p's search stopped early or lost
+        // candidates to overflow: a later seed's clique with p in it would be one of those.
+        frame_.seeded[p] = enumerated && counters_.candidateOverflow == overflowBefore;
     }
     if (!haveBest)
         return;
@@ -510,7 +516,7 @@ void ModelTracker::search(std::size_t body, double time_s) {
     accept(body, PoseSource::Searched, best);
 }
 
-void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
+bool ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
                               bool& haveBest) {
     const ModelSlot& slot = models_.slots[body];
     const double tolerance = config_.distanceTolerance_mm;
@@ -528,7 +534,7 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
 
     // The hashtable lookups: every free point q at a model edge's length from p.
     for (std::size_t q = 0; q < frame_.count; ++q) {
-        if (q == p || frame_.owner[q] >= 0)
+        if (q == p || frame_.owner[q] >= 0 || frame_.seeded[q])
             continue;
         ++frameChecks_;
         const double d = pointDistance(p, q);
@@ -562,7 +568,7 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
         if (count < degreeNeeded + 1)
             continue;
         if (!budgetLeft())
-            return;
+            return false;
         const Candidate* list = &frame_.candidates[v * perMarker];
         std::uint64_t* agreement = match_.agreement.data();
         for (std::size_t a = 0; a < count; ++a)
@@ -610,7 +616,7 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
                 for (std::uint64_t restC = withAB; restC != 0; restC &= restC - 1) {
                     const auto c = static_cast<std::size_t>(std::countr_zero(restC));
                     if (!budgetLeft())
-                        return;
+                        return false;
                     const Candidate clique[4] = {
                         Candidate{static_cast<std::uint16_t>(p), static_cast<std::uint16_t>(v)},
                         list[a], list[b], list[c]};
@@ -618,11 +624,12 @@ void ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
                     // p is explained once one of its cliques gave a body: its other cliques
                     // would only find the same pose again.
                     if (frame_.explained[p])
-                        return;
+                        return false;
                 }
             }
         }
     }
+    return true;
 }
 
 void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> clique,

@@ -217,7 +217,8 @@ private:
     bool predict(std::size_t body, double time_s, RigidTransform& T_rig_from_model) const;
     bool confirmPrediction(std::size_t body, const RigidTransform& predicted);
     void search(std::size_t body, double time_s);
-    void searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
+    /// Evaluates the cliques that hold point \a p; false when it stopped before the last.
+    bool searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
                     bool& haveBest);
     void evaluateClique(std::size_t body, std::span<const Candidate> clique, double time_s,
                         Hypothesis& best, bool& haveBest);
@@ -288,6 +289,9 @@ private:
         /// The body each point was given to (-1: free).
         std::vector<std::int16_t> owner;
         std::vector<std::uint8_t> explained;
+        /// Points every clique of which the search has looked at, as a seed: later seeds leave
+        /// them out, since any clique holding them was evaluated from them.
+        std::vector<std::uint8_t> seeded;
         std::vector<std::uint16_t> nearby;
         std::vector<std::uint32_t> candidateCount;
         std::vector<Candidate> candidates;

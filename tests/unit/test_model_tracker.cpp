@@ -312,6 +312,34 @@ TEST(ModelTracker, RefusesAtOnceCliquesThatMatchAsARefusedOne) {
     EXPECT_EQ(lenient.counters().repeatedRefusals, 0u);
 }
 
+// A clique is the same hypothesis whichever of its points the search started from: four points
+// a little off a four-marker layout (distances within the tolerance, fit above the gate) are
+// one clique, looked at once, not once from each of its points.
+TEST(ModelTracker, LooksAtEachCliqueOnceWhicheverPointItStartsFrom) {
+    const std::vector<Vec3> layout = test::irregularLayout(4, 31, 12.0);
+    const MarkerModel model = completeModel(layout, 0, 4);
+    std::mt19937 random(3);
+    std::normal_distribution<double> off(0.0, 0.15);
+    std::vector<Vec3> points;
+    place(layout, pose(1.2, {2, 1, -1}, {-15.0, 20.0, 590.0}), all, points);
+    for (Vec3& p : points)
+        p += Vec3(off(random), off(random), off(random));
+
+    ModelTrackingConfig tight;
+    tight.maxRms_mm = 0.02;
+    ModelTracker tracker(std::span(&model, 1), tight);
+    tracker.update(0.0, points);
+    EXPECT_FALSE(tracker.bodies()[0].found());
+    EXPECT_EQ(tracker.counters().searches, 1u);
+    EXPECT_EQ(tracker.counters().hypotheses, 1u);
+
+    // Within the gate the same points are the body.
+    ModelTracker lenient(std::span(&model, 1), ModelTrackingConfig{});
+    lenient.update(0.0, points);
+    ASSERT_TRUE(lenient.bodies()[0].found());
+    EXPECT_EQ(lenient.bodies()[0].markers, 4u);
+}
+
 TEST(ModelTracker, CountsPointsBeyondCapacity) {
     const std::vector<Vec3> layout = test::irregularLayout(6, 71, 12.0);
     const MarkerModel model = completeModel(layout, 0, 4);
