@@ -300,6 +300,28 @@ bool MarkerPipeline::mergedBlobAt(int camera, const Vec2& pixel_px, int& blob, B
     return false;
 }
 
+bool MarkerPipeline::nearerMarkerCovers(int camera, const Vec2& pixel_px, const Vec3& point_rig_mm,
+                                        double size_pxmm, int& blob) const {
+    const BoundedVector<Blob>& blobs = blobs_[index(camera)];
+    const Vec3 centre_rig_mm = stereo_.rig().camera(camera).centre_rig_mm();
+    const double range_mm = (point_rig_mm - centre_rig_mm).norm();
+    // Of unknown size (size_pxmm 0), the point's centre at least must lie so within the disc.
+    const double radius_px = size_pxmm / range_mm;
+    for (std::size_t b = 0; b < blobs.size(); ++b) {
+        const int marker = markerOfBlob_[index(camera)][b];
+        if (marker < 0 || blobs[b].split ||
+            (blobs[b].centre_px - pixel_px).norm() + radius_px >
+                blobs[b].discRadius_px() + kHiddenDiscMargin_px)
+            continue;
+        const StereoMarker& front = markers_[static_cast<std::size_t>(marker)];
+        if (!front.carried && (front.position_rig_mm - centre_rig_mm).norm() < range_mm) {
+            blob = static_cast<int>(b);
+            return true;
+        }
+    }
+    return false;
+}
+
 Vec3 MarkerPipeline::neighboursStep(std::size_t hidden) const {
     // Weighted by nearness, so that the markers of its own object count most where objects pass
     // each other.
@@ -383,12 +405,15 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
         if (bestCamera < 0 || markers_.size() == markers_.capacity())
             continue;
         // Hidden in the other image: a blob of several discs (and, given the image, a lit pixel)
-        // lies where the point projects there. A single disc there is a marker of its own (a
-        // spurious pair of reflections that had lasted 20 frames was carried on the crowd).
+        // lies where the point projects there, or a nearer marker's round blob covers its whole
+        // disc. Any other single disc there is a marker of its own (a spurious pair of
+        // reflections that had lasted 20 frames was carried on the crowd).
         const std::optional<Vec2> hidden_px =
             stereo_.rig().camera(1 - bestCamera).project(bestPoint_rig_mm);
         int cover = -1;
-        if (!hidden_px || !mergedBlobAt(1 - bestCamera, *hidden_px, cover))
+        if (!hidden_px || (!mergedBlobAt(1 - bestCamera, *hidden_px, cover) &&
+                           !nearerMarkerCovers(1 - bestCamera, *hidden_px, bestPoint_rig_mm,
+                                               last.size_pxmm, cover)))
             continue;
         if (const ImageView& image = images[index(1 - bestCamera)]; image.pixels != nullptr) {
             const long x = std::lround(hidden_px->x()), y = std::lround(hidden_px->y());

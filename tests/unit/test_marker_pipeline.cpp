@@ -383,6 +383,51 @@ TEST(MarkerPipeline, DoesNotCarryAMarkerWhereTheOtherImageShowsOneDisc) {
     EXPECT_EQ(run.carried, 0U);
 }
 
+/// 40 frames of the desktop rig in which marker A moves along x at 480 mm and marker B, as
+/// large and 20 mm nearer camera 0, slides in front of A by frame 30, to \a aside_mm off camera
+/// 0's ray through A, and stays there to frame 39. In those ten frames camera 0 has B's round
+/// blob alone; camera 1 sees both apart. Returns the frames of those ten in which a point lay
+/// within 0.5 mm of A.
+int framesFoundBehindARoundBlob(double aside_mm) {
+    const StereoRig rig = test::desktopRig();
+    MarkerPipeline pipeline(rig, MarkerPipelineConfig{});
+    const Vec3 c0 = rig.camera(0).centre_rig_mm();
+    int found = 0;
+    for (int frame = 0; frame < 40; ++frame) {
+        const Vec3 a(40.0 + 0.5 * frame, 10.0, 480.0);
+        const Vec3 onRay = a - 20.0 * (a - c0).normalized();
+        const double sliding = std::clamp((30.0 - frame) / 10.0, 0.0, 1.0);
+        const Vec3 b = onRay + Vec3(0.0, aside_mm + (12.0 - aside_mm) * sliding, 0.0);
+        const bool hidden = frame >= 30;
+        for (int camera = 0; camera < 2; ++camera) {
+            pipeline.blobs(camera).clear();
+            if (!(camera == 0 && hidden))
+                pipeline.blobs(camera).push_back(sphereBlob(rig, camera, a));
+            pipeline.blobs(camera).push_back(sphereBlob(rig, camera, b));
+        }
+        pipeline.matchStereo();
+        if (!hidden)
+            continue;
+        bool foundA = false;
+        for (const Vec3& point : pipeline.points_rig_mm())
+            foundA = foundA || (point - a).norm() < 0.5;
+        found += foundA ? 1 : 0;
+    }
+    return found;
+}
+
+TEST(MarkerPipeline, CarriesAMarkerHiddenBehindANearerMarkersRoundBlob) {
+    // A quarter and half a millimetre aside (0.5 and 0.9 px), A's disc lies inside B's but for
+    // half a pixel: one round blob, B's, which nothing marks as merged. B is nearer, so A may be
+    // behind it; A is carried on its own disc in camera 1 in all ten frames (in none before the
+    // nearer marker's round blob counted as a cover).
+    EXPECT_EQ(framesFoundBehindARoundBlob(0.25), 10);
+    EXPECT_EQ(framesFoundBehindARoundBlob(0.5), 10);
+    // A millimetre and a half aside, A's disc would stick out of B's by 2.4 px, which the image
+    // does not show: A has gone, and is not carried.
+    EXPECT_EQ(framesFoundBehindARoundBlob(1.5), 0);
+}
+
 /// What runClosingCluster() saw in the frames its markers' discs lie far over each other in both
 /// images: frames in which each was found within 0.5 mm, and points more than 1 mm from all.
 struct ClusterRun {
