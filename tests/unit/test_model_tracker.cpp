@@ -42,6 +42,19 @@ void expectPose(const TrackedBody& body, const RigidTransform& truth, double tol
 
 const auto all = [](std::size_t) { return true; };
 
+/// Every marker of \a layout placed by \a T_rig_from_model, each moved by noise of \a sigma_mm
+/// in every axis (random seed \a seed).
+std::vector<Vec3> placedOff(const std::vector<Vec3>& layout, const RigidTransform& T_rig_from_model,
+                            double sigma_mm, unsigned seed) {
+    std::mt19937 random(seed);
+    std::normal_distribution<double> off(0.0, sigma_mm);
+    std::vector<Vec3> points;
+    place(layout, T_rig_from_model, all, points);
+    for (Vec3& p : points)
+        p += Vec3(off(random), off(random), off(random));
+    return points;
+}
+
 /// Models are move-only (their storage is sized once), so lists of them are built by moves.
 template <typename... Models>
 std::vector<MarkerModel> modelList(Models&&... models) {
@@ -285,13 +298,8 @@ TEST(ModelTracker, BoundsTheWorkOfAFloodOfSpuriousPoints) {
 TEST(ModelTracker, RefusesAtOnceCliquesThatMatchAsARefusedOne) {
     const std::vector<Vec3> layout = test::irregularLayout(12, 23, 12.0);
     const MarkerModel model = completeModel(layout, 0, 4);
-    const RigidTransform truth = pose(0.6, {1, -1, 2}, {10.0, 5.0, 580.0});
-    std::mt19937 random(5);
-    std::normal_distribution<double> off(0.0, 0.5);
-    std::vector<Vec3> points;
-    place(layout, truth, all, points);
-    for (Vec3& p : points)
-        p += Vec3(off(random), off(random), off(random));
+    const std::vector<Vec3> points =
+        placedOff(layout, pose(0.6, {1, -1, 2}, {10.0, 5.0, 580.0}), 0.5, 5);
 
     ModelTrackingConfig tight;
     tight.maxRms_mm = 0.3;
@@ -318,12 +326,8 @@ TEST(ModelTracker, RefusesAtOnceCliquesThatMatchAsARefusedOne) {
 TEST(ModelTracker, LooksAtEachCliqueOnceWhicheverPointItStartsFrom) {
     const std::vector<Vec3> layout = test::irregularLayout(4, 31, 12.0);
     const MarkerModel model = completeModel(layout, 0, 4);
-    std::mt19937 random(3);
-    std::normal_distribution<double> off(0.0, 0.15);
-    std::vector<Vec3> points;
-    place(layout, pose(1.2, {2, 1, -1}, {-15.0, 20.0, 590.0}), all, points);
-    for (Vec3& p : points)
-        p += Vec3(off(random), off(random), off(random));
+    const std::vector<Vec3> points =
+        placedOff(layout, pose(1.2, {2, 1, -1}, {-15.0, 20.0, 590.0}), 0.15, 3);
 
     ModelTrackingConfig tight;
     tight.maxRms_mm = 0.02;
