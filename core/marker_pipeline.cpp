@@ -306,7 +306,7 @@ bool MarkerPipeline::nearerMarkerCovers(int camera, const Vec2& pixel_px, const 
     const Vec3 centre_rig_mm = stereo_.rig().camera(camera).centre_rig_mm();
     const double range_mm = (point_rig_mm - centre_rig_mm).norm();
     // Of unknown size (size_pxmm 0), the point's centre at least must lie so within the disc.
-    const double radius_px = size_pxmm / range_mm;
+    const double radius_px = radiusAt(size_pxmm, point_rig_mm, camera);
     for (std::size_t b = 0; b < blobs.size(); ++b) {
         const int marker = markerOfBlob_[index(camera)][b];
         if (marker < 0 || blobs[b].split ||

@@ -175,6 +175,9 @@ private:
     /// Radius (px) times range (mm) of marker \a m's blobs, the mean of both cameras'; 0 when
     /// unknown (a carried marker's other blob covers several discs).
     double markerSize(std::size_t m) const;
+    /// The image radius (px) in \a camera of a marker of \a size_pxmm (as markerSize()) at
+    /// \a point_rig_mm.
+    double radiusAt(double size_pxmm, const Vec3& point_rig_mm, int camera) const;
     /// The step (mm) from the last frame to this one of the points near last_[\a hidden] that a
     /// marker continues (within kNeighbourhood_mm, the nearer weighing more); zero when none.
     /// Not its own last step carried on: a marker about to hide moves its disc into another's,

@@ -21,6 +21,10 @@ double MarkerPipeline::markerSize(std::size_t m) const {
     return 0.5 * sum;
 }
 
+double MarkerPipeline::radiusAt(double size_pxmm, const Vec3& point_rig_mm, int camera) const {
+    return size_pxmm / (point_rig_mm - stereo_.rig().camera(camera).centre_rig_mm()).norm();
+}
+
 void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>& images) {
     constexpr std::size_t kMaxDiscs = BlobDetector::kMaxLineDiscs;
     constexpr int kNone = -1, kNoBlob = -2;
@@ -35,10 +39,6 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
         std::array<bool, 2> placed{};
     };
     FixedVector<Sought, kMaxSoughtMarkers> sought;
-    // The image radius (px) in \a camera of a marker of size \a size_pxmm at \a point_rig_mm.
-    const auto radiusAt = [&](double size_pxmm, const Vec3& point_rig_mm, int camera) {
-        return size_pxmm / (point_rig_mm - stereo_.rig().camera(camera).centre_rig_mm()).norm();
-    };
     // Point last_[i], where it is expected in both images.
     const auto seek = [&](std::size_t i) {
         const LastPoint& last = last_[i];

@@ -502,11 +502,9 @@ void ModelTracker::search(std::size_t body, double time_s) {
             ++counters_.searchesSkipped;
             break;
         }
-        const std::uint64_t overflowBefore = counters_.candidateOverflow;
-        const bool enumerated = searchFrom(body, p, time_s, best, haveBest);
-        // Every clique holding p was looked at from p, unless p's search stopped early or lost
-        // candidates to overflow: a later seed's clique with p in it would be one of those.
-        frame_.seeded[p] = enumerated && counters_.candidateOverflow == overflowBefore;
+        // Once every clique holding p was looked at from p, a later seed's clique with p in it
+        // would be one of those.
+        frame_.seeded[p] = searchFrom(body, p, time_s, best, haveBest);
     }
     if (!haveBest)
         return;
@@ -522,10 +520,12 @@ bool ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
     const double tolerance = config_.distanceTolerance_mm;
     const std::size_t perMarker = config_.maxCandidatesPerMarker;
     std::fill_n(frame_.candidateCount.begin(), slot.markerCount, 0U);
+    bool dropped = false;
     auto addCandidate = [&](std::size_t marker, std::size_t point, std::size_t other) {
         std::uint32_t& count = frame_.candidateCount[marker];
         if (count >= perMarker) {
             ++counters_.candidateOverflow;
+            dropped = true;
             return;
         }
         frame_.candidates[marker * perMarker + count++] =
@@ -629,7 +629,7 @@ bool ModelTracker::searchFrom(std::size_t body, std::size_t p, double time_s, Hy
             }
         }
     }
-    return true;
+    return !dropped;
 }
 
 void ModelTracker::evaluateClique(std::size_t body, std::span<const Candidate> clique,

@@ -217,7 +217,8 @@ private:
     bool predict(std::size_t body, double time_s, RigidTransform& T_rig_from_model) const;
     bool confirmPrediction(std::size_t body, const RigidTransform& predicted);
     void search(std::size_t body, double time_s);
-    /// Evaluates the cliques that hold point \a p; false when it stopped before the last.
+    /// Evaluates the cliques that hold point \a p; false when it did not evaluate them all (it
+    /// stopped early, or dropped candidates to maxCandidatesPerMarker).
     bool searchFrom(std::size_t body, std::size_t p, double time_s, Hypothesis& best,
                     bool& haveBest);
     void evaluateClique(std::size_t body, std::span<const Candidate> clique, double time_s,
