@@ -26,6 +26,7 @@
 
 #include "core/calibration_completion.hpp"
 #include "core/calibration_session.hpp"
+#include "core/completion_geometry.hpp"
 #include "core/object_calibrator.hpp"
 #include "core/rigid_fit.hpp"
 #include "core/session_buffer.hpp"
@@ -550,26 +551,33 @@ int main(int argc, char** argv) {
                 start = f;
             }
         }
-        std::vector<std::uint64_t> groups(seenTogether[k].begin(), seenTogether[k].end());
-        for (bool merged = true; merged;) {
-            merged = false;
-            for (std::size_t i = 0; i < groups.size() && !merged; ++i)
-                for (std::size_t j = i + 1; j < groups.size() && !merged; ++j)
-                    if (std::popcount(groups[i] & groups[j]) >= 3) {
-                        groups[i] |= groups[j];
-                        groups.erase(groups.begin() + static_cast<std::ptrdiff_t>(j));
-                        merged = true;
-                    }
-        }
+        // Three shared markers on one line leave the turn about it open (two faces of a box
+        // that share only markers on their common edge): sets are merged while they share
+        // markers as far off one line as the tracker asks of a pose's, as completion's own rigid
+        // groups are.
+        std::vector<completion_detail::MarkerBits> views;
+        for (const std::uint64_t v : seenTogether[k])
+            views.push_back({v, 0});
+        std::vector<std::uint64_t> groups;
+        for (const completion_detail::MarkerBits& g : completion_detail::rigidGroupsOf(
+                 views, layouts[k], CompletionConfig{}.tracking.minPoseSpread_mm))
+            groups.push_back(g[0]);
         std::uint64_t due = 0;
         for (std::size_t m = 0; m < expected[k].size() && m < 64; ++m)
             if (expected[k][m])
                 due |= std::uint64_t{1} << m;
-        // A group whose due markers all lie in another group adds nothing to tie.
+        // A group whose due markers all lie in another group adds nothing to tie. Due markers
+        // seen only on one line with the others (a plate's row of four) are in no group: nothing
+        // ties them to the rest.
         std::vector<std::uint64_t> duePart;
-        for (const std::uint64_t g : groups)
+        std::uint64_t grouped = 0;
+        for (const std::uint64_t g : groups) {
+            grouped |= g;
             if ((g & due) != 0)
                 duePart.push_back(g & due);
+        }
+        if ((due & ~grouped) != 0)
+            duePart.push_back(due & ~grouped);
         std::sort(duePart.begin(), duePart.end());
         duePart.erase(std::unique(duePart.begin(), duePart.end()), duePart.end());
         const auto tiedGroups = std::count_if(duePart.begin(), duePart.end(), [&](std::uint64_t d) {
@@ -579,7 +587,7 @@ int main(int argc, char** argv) {
         });
         if (learnable(o) && layouts[k].size() <= 64 && tiedGroups > 1)
             std::printf("    its due markers lie in %lld rigid groups that never share three "
-                        "markers in view\n",
+                        "markers off one line in view\n",
                         static_cast<long long>(tiedGroups));
     }
     for (std::size_t i = 0; i < count; ++i) {
