@@ -26,7 +26,7 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , points_rig_mm_(config.stereo.maxMarkers)
     , last_(config.stereo.maxMarkers)
     , current_(config.stereo.maxMarkers)
-    , continuing_(config.stereo.maxMarkers)
+    , continuation_mm_(config.stereo.maxMarkers)
     , lastContinued_(config.stereo.maxMarkers)
     , lastStep_(config.stereo.maxMarkers)
     , continuesLast_(config.stereo.maxMarkers)
@@ -71,6 +71,10 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
     if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
         images[1].pixels != nullptr)
         splitOnEpipolarLines(images);
+    // The split pass pairs the discs of merged blobs, two markers on one epipolar line in both
+    // images crosswise as readily as the matcher does: its pairs are looked at again.
+    if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0)
+        preferContinuingPairs();
     if (config_.stereo.continuity_mm > 0.0)
         noteContinuedPoints();
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
@@ -209,20 +213,27 @@ double MarkerPipeline::continuedDistance(const Vec3& point_rig_mm, std::size_t m
 void MarkerPipeline::preferContinuingPairs() {
     if (last_.empty())
         return;
+    const double reach_mm = config_.stereo.continuity_mm;
     const double band_px = config_.stereo.epipolarBand_sigmas * config_.stereo.sigmaEpipolar_px;
-    continuing_.clear();
+    // What a marker costs the frame's continuity: how far it lies from where a point of the last
+    // frame was expected, or the whole reach for one that continues none.
+    const auto cost = [&](double distance_mm) { return std::min(distance_mm, reach_mm); };
+    continuation_mm_.clear();
     for (const StereoMarker& marker : markers_)
-        continuing_.push_back(
-            distanceToLastFrame(marker.position_rig_mm) <= config_.stereo.continuity_mm ? 1 : 0);
+        continuation_mm_.push_back(cost(distanceToLastFrame(marker.position_rig_mm)));
     for (std::size_t m = 0; m < markers_.size(); ++m) {
-        if (continuing_[m] != 0)
+        // An exchange must gain more than kContinuityMargin_mm over both markers' costs, so one
+        // whose cost is below half of it is left to its partner in the exchange to look at.
+        if (continuation_mm_[m] <= 0.5 * kContinuityMargin_mm)
             continue;
-        // The marker continues nothing. In either camera, another blob on the epipolar line of
-        // its blob in the other camera may be the partner that does: a blob without a partner,
-        // or the blob of another marker that continues nothing either, which then takes this
-        // marker's blob in exchange (two markers on one line, paired crosswise).
+        // In either camera, another blob on the epipolar line of its blob in the other camera
+        // may be the partner that continues a point better: a blob without a partner, or the
+        // blob of another marker, which then takes this marker's blob in exchange (two markers
+        // on one line, paired crosswise: a ghost in front and one behind, which may go on from
+        // frame to frame as smoothly as markers do, but not as closely as the two markers).
         struct Choice {
-            double distance_mm = std::numeric_limits<double>::infinity();
+            double gain_mm = kContinuityMargin_mm;
+            double cost_mm = 0.0, otherCost_mm = 0.0;
             StereoMarker marker, other;
             int camera = -1, given = -1, taken = -1, n = -1;
         } best;
@@ -238,15 +249,17 @@ void MarkerPipeline::preferContinuingPairs() {
                 const int blob = static_cast<int>(u);
                 Vec2 rectified;
                 const int n = markerOfBlob_[index(camera)][u];
-                if (blob == own || (n >= 0 && continuing_[static_cast<std::size_t>(n)] != 0) ||
-                    !stereo_.preparedBlob(camera, blob, ray, rectified) ||
+                if (blob == own || !stereo_.preparedBlob(camera, blob, ray, rectified) ||
                     !(crossingOff(camera, rectified, keptRectified, band_px, 0.0) <
                       std::numeric_limits<double>::infinity()))
                     continue;
                 Choice choice;
                 if (!pairBlobs(camera, blob, kept, choice.marker))
                     continue;
-                choice.distance_mm = continuedDistance(choice.marker.position_rig_mm, m, n);
+                choice.cost_mm = continuedDistance(choice.marker.position_rig_mm, m, n);
+                if (!(choice.cost_mm <= reach_mm))
+                    continue; // the new pair must continue a point
+                double before_mm = continuation_mm_[m];
                 if (n >= 0) {
                     const StereoMarker& other = markers_[static_cast<std::size_t>(n)];
                     if (!pairBlobs(camera, own, camera == 0 ? other.blob1 : other.blob0,
@@ -254,8 +267,13 @@ void MarkerPipeline::preferContinuingPairs() {
                         continue;
                     // The other marker need not continue anything: it may have come into
                     // view as this one's partner hid it.
+                    choice.otherCost_mm =
+                        cost(continuedDistance(choice.other.position_rig_mm,
+                                               static_cast<std::size_t>(n), static_cast<int>(m)));
+                    before_mm += continuation_mm_[static_cast<std::size_t>(n)];
                 }
-                if (choice.distance_mm < best.distance_mm) {
+                choice.gain_mm = before_mm - choice.cost_mm - choice.otherCost_mm;
+                if (choice.gain_mm > best.gain_mm) {
                     choice.camera = camera;
                     choice.given = own;
                     choice.taken = blob;
@@ -270,11 +288,11 @@ void MarkerPipeline::preferContinuingPairs() {
         markers_[m] = best.marker;
         markerOfBlob_[own][static_cast<std::size_t>(best.taken)] = static_cast<int>(m);
         markerOfBlob_[own][static_cast<std::size_t>(best.given)] = best.n;
-        continuing_[m] = 1;
+        continuation_mm_[m] = best.cost_mm;
         ++pairsForContinuity_;
         if (best.n >= 0) {
             markers_[static_cast<std::size_t>(best.n)] = best.other;
-            continuing_[static_cast<std::size_t>(best.n)] = 1;
+            continuation_mm_[static_cast<std::size_t>(best.n)] = best.otherCost_mm;
             ++pairsForContinuity_;
         }
     }

@@ -141,11 +141,14 @@ private:
     static std::size_t index(int camera) { return camera == 0 ? 0 : 1; }
     /// markerOfBlob_ from markers_.
     void indexMarkersByBlob();
-    /// Between stereo and the split pass: a marker whose point continues none of the last
-    /// frame's points takes, in one camera, another blob on its epipolar line when that pair's
-    /// point continues one: a blob without a partner (two markers on one line, one hidden from
-    /// the other camera), or the blob of another marker that continues nothing either, which
-    /// takes this marker's blob in exchange (two markers on one line, paired crosswise).
+    /// After stereo, and again after the split pass: a marker takes, in one camera, another
+    /// blob on its epipolar line when that pair's point continues a point of the last frame and
+    /// the frame's points then continue the last frame's closer by more than
+    /// kContinuityMargin_mm (a marker that continues none counting as StereoConfig::continuity_mm
+    /// off): a blob without a partner (two markers on one line, one hidden from the other
+    /// camera), or the blob of another marker, which takes this marker's blob in exchange (two
+    /// markers on one line, paired crosswise, whose ghosts may have gone on from frame to frame
+    /// as smoothly as markers, but not as close to the two markers' points).
     void preferContinuingPairs();
     /// After the split pass: a point of the last frame that had continued kMinContinuedFrames and
     /// that no marker continues now is carried on when one camera has a blob without a partner on
@@ -299,8 +302,9 @@ private:
     /// (the two swap their storage).
     BoundedVector<LastPoint> last_;
     BoundedVector<LastPoint> current_;
-    /// Per marker of this frame, during preferContinuingPairs(): whether it continues a point.
-    BoundedVector<std::uint8_t> continuing_;
+    /// Per marker of this frame, during preferContinuingPairs(): how far it lies from where a
+    /// point of the last frame was expected (mm), StereoConfig::continuity_mm at most.
+    BoundedVector<double> continuation_mm_;
     /// Per point of the last frame, from noteContinuedPoints() on: whether a marker continues it.
     BoundedVector<std::uint8_t> lastContinued_;
     /// Per point of the last frame that a marker continues, its step to this frame (mm).
@@ -351,6 +355,11 @@ private:
     /// percentile (seeds 1-6), while a ghost of the crowd (two markers' images, paired crosswise
     /// for 20 frames and then left with one) stuck out 1.25 px and more.
     static constexpr double kHiddenDiscMargin_px = 1.0;
+    /// preferContinuingPairs() exchanges blobs only when that brings the markers involved this
+    /// much nearer (mm, summed) to where points of the last frame were expected: a marker
+    /// continues its point within a few tenths of a millimetre at 100 Hz (touching scene: 0.02-0.6
+    /// mm), so less is noise.
+    static constexpr double kContinuityMargin_mm = 1.0;
     /// continuesLast_ of a marker splitWhereMarkersAreExpected() drops.
     static constexpr int kDroppedMarker = -2;
     std::size_t splitAttemptsLeft_ = 0;

@@ -291,6 +291,36 @@ TEST(MarkerPipeline, PairsTwoMarkersOnOneLineByTheMarkerThatWasThere) {
     EXPECT_EQ(with.changed, 40U);
 }
 
+TEST(MarkerPipeline, UndoesCrosswisePairsWhoseGhostWentOnFromAFrameBefore) {
+    // Markers A and C move along together, C 20 mm aside of A until frame 15 and then sliding,
+    // by frame 25, onto A's epipolar plane, 3 mm across and 40 mm deeper (as above). In frame 30
+    // camera 0 sees only A and camera 1 only C (a hand in each view): their one pair is a ghost
+    // at neither marker. From frame 31 both cameras see both, and the correspondence pairs them
+    // crosswise: one ghost goes on from the ghost of frame 30, the other from nothing, while the
+    // two markers' own pairs go on from A and C, missing for a frame, within half a millimetre.
+    const StereoRig rig = test::desktopRig();
+    const Vec3 c0 = rig.camera(0).centre_rig_mm();
+    const Vec3 c1 = rig.camera(1).centre_rig_mm();
+    auto fill = [&](MarkerPipeline& pipeline, const Vec3& a, int frame) {
+        const double sliding = std::clamp((25.0 - frame) / 10.0, 0.0, 1.0);
+        const Vec3 c = a - 3.0 * (c1 - c0).normalized() + 40.0 * (a - c0).normalized() +
+                       Vec3(0.0, 20.0 * sliding, 0.0);
+        const bool handsIn = frame == 30;
+        pipeline.blobs(0).push_back(sphereBlob(rig, 0, a));
+        pipeline.blobs(1).push_back(sphereBlob(rig, 1, c));
+        if (!handsIn) {
+            pipeline.blobs(0).push_back(sphereBlob(rig, 0, c));
+            pipeline.blobs(1).push_back(sphereBlob(rig, 1, a));
+        }
+        return handsIn ? std::vector<Vec3>{} : std::vector<Vec3>{a, c};
+    };
+    const ContinuityRun run = runAlongALine(3.0, fill);
+    EXPECT_EQ(run.ghostsBefore, 0);
+    // Only frame 30's ghost, the one pair its images allow. Exchanged only for a marker that
+    // continued nothing, the crossed pairs stayed: 39 ghosts, both in every frame from 31 on.
+    EXPECT_EQ(run.ghostsAfter, 1);
+}
+
 /// What runHiddenInCamera0() saw in the ten frames marker A hides: frames in which a point lay
 /// within 0.5 mm of A, points more than 1 mm from both markers, and markers carried.
 struct HiddenRun {
