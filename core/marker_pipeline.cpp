@@ -27,6 +27,8 @@ MarkerPipeline::MarkerPipeline(const StereoRig& rig, const MarkerPipelineConfig&
     , last_(config.stereo.maxMarkers)
     , current_(config.stereo.maxMarkers)
     , continuation_mm_(config.stereo.maxMarkers)
+    , rectified_px_{BoundedVector<Vec2>(config.blobs.maxBlobs),
+                    BoundedVector<Vec2>(config.blobs.maxBlobs)}
     , lastContinued_(config.stereo.maxMarkers)
     , lastStep_(config.stereo.maxMarkers)
     , continuesLast_(config.stereo.maxMarkers)
@@ -221,6 +223,23 @@ void MarkerPipeline::preferContinuingPairs() {
     continuation_mm_.clear();
     for (const StereoMarker& marker : markers_)
         continuation_mm_.push_back(cost(distanceToLastFrame(marker.position_rig_mm)));
+    // Every blob's place in rectified coordinates from its centre now: after the split pass,
+    // stereo has prepared none for the parts it added, and a member centred anew has left its
+    // own.
+    for (int camera = 0; camera < 2; ++camera) {
+        BoundedVector<Vec2>& rectified = rectified_px_[index(camera)];
+        rectified.clear();
+        for (const Blob& blob : blobs_[index(camera)]) {
+            const std::optional<Ray> ray = stereo_.rig().camera(camera).ray(blob.centre_px);
+            const std::optional<Vec2> place =
+                ray ? stereo_.rig().rectifyDirection(ray->direction_rig) : std::nullopt;
+            rectified.push_back(place ? *place
+                                      : Vec2::Constant(std::numeric_limits<double>::quiet_NaN()));
+        }
+    }
+    const auto placeOf = [&](int camera, int blob) -> const Vec2& {
+        return rectified_px_[index(camera)][static_cast<std::size_t>(blob)];
+    };
     for (std::size_t m = 0; m < markers_.size(); ++m) {
         // An exchange must gain more than kContinuityMargin_mm over both markers' costs, so one
         // whose cost is below half of it is left to its partner in the exchange to look at.
@@ -241,15 +260,14 @@ void MarkerPipeline::preferContinuingPairs() {
             const StereoMarker& marker = markers_[m];
             const int own = camera == 0 ? marker.blob0 : marker.blob1;
             const int kept = camera == 0 ? marker.blob1 : marker.blob0;
-            Ray ray;
-            Vec2 keptRectified;
-            if (!stereo_.preparedBlob(1 - camera, kept, ray, keptRectified))
+            const Vec2& keptRectified = placeOf(1 - camera, kept);
+            if (!keptRectified.allFinite())
                 continue;
             for (std::size_t u = 0; u < blobs_[index(camera)].size(); ++u) {
                 const int blob = static_cast<int>(u);
-                Vec2 rectified;
+                const Vec2& rectified = placeOf(camera, blob);
                 const int n = markerOfBlob_[index(camera)][u];
-                if (blob == own || !stereo_.preparedBlob(camera, blob, ray, rectified) ||
+                if (blob == own || !rectified.allFinite() ||
                     !(crossingOff(camera, rectified, keptRectified, band_px, 0.0) <
                       std::numeric_limits<double>::infinity()))
                     continue;

@@ -305,6 +305,9 @@ private:
     /// Per marker of this frame, during preferContinuingPairs(): how far it lies from where a
     /// point of the last frame was expected (mm), StereoConfig::continuity_mm at most.
     BoundedVector<double> continuation_mm_;
+    /// Per blob of each camera, during preferContinuingPairs(): its centre's place in rectified
+    /// coordinates (NaN where it has none).
+    std::array<BoundedVector<Vec2>, 2> rectified_px_;
     /// Per point of the last frame, from noteContinuedPoints() on: whether a marker continues it.
     BoundedVector<std::uint8_t> lastContinued_;
     /// Per point of the last frame that a marker continues, its step to this frame (mm).
