@@ -3,6 +3,8 @@
 //
 //   eval_marker_tracking --scene two_cubes --frames 2000 [--seed 1] [--matcher svd|epipolar]
 //                        [--require-found 0.99] [--require-false 0.01] [--require-switches 1e-4]
+//                        [--require-found-of-exact 0.99] [--require-false-of-all 0.005]
+//                        [--require-split-rms 0.15]
 //
 // Renders each frame at images level, runs the core pipeline exactly as the firmware does, and
 // compares with the simulator's truth. Exits 1 when a --require target is missed.
@@ -152,6 +154,7 @@ int main(int argc, char** argv) {
     std::uint64_t seed = 1;
     std::string matcher = "svd";
     double requireFound = -1.0, requireFalse = -1.0, requireSwitches = -1.0;
+    double requireFoundOfExact = -1.0, requireFalseOfAll = -1.0, requireSplitRms = -1.0;
     app.add_option("--scene", sceneName);
     app.add_option("--frames", frames)->check(CLI::PositiveNumber);
     app.add_option("--seed", seed);
@@ -159,6 +162,12 @@ int main(int argc, char** argv) {
     app.add_option("--require-found", requireFound, "minimum share of markers found");
     app.add_option("--require-false", requireFalse, "maximum false markers per true marker");
     app.add_option("--require-switches", requireSwitches, "maximum ID switches per marker-frame");
+    app.add_option("--require-found-of-exact", requireFoundOfExact,
+                   "minimum share of the markers found from exact blobs found at images level");
+    app.add_option("--require-false-of-all", requireFalseOfAll,
+                   "maximum false markers per marker seen by both cameras, merged or not");
+    app.add_option("--require-split-rms", requireSplitRms,
+                   "maximum RMS of split blobs' parts from their discs' true centres (px)");
     MarkerPipelineConfig pipelineConfig;
     StereoConfig& stereoConfig = pipelineConfig.stereo;
     app.add_option("--sigma-epipolar", stereoConfig.sigmaEpipolar_px, "sigma_ep of eq. 1 (px)");
@@ -383,6 +392,16 @@ int main(int argc, char** argv) {
     const double falseShare =
         static_cast<double>(totals.falseMarkers) /
         static_cast<double>(std::max<std::uint64_t>(1, totals.separatelyVisible));
+    // Issue 22's measures: markers found at images level of those found from exact blobs,
+    // false markers of all markers seen by both cameras, and the split parts' centres.
+    const double foundOfExact =
+        static_cast<double>(totals.found + totals.foundOfMerged) /
+        static_cast<double>(std::max<std::uint64_t>(1, totals.foundFromExactBlobs));
+    const double falseOfAll = static_cast<double>(totals.falseMarkers) /
+                              static_cast<double>(std::max<std::uint64_t>(1, totals.visibleToBoth));
+    const double splitRms =
+        std::sqrt(totals.splitSquaredError /
+                  static_cast<double>(std::max<std::uint64_t>(1, totals.splitParts)));
     const double rms = std::sqrt(totals.squaredError /
                                  static_cast<double>(std::max<std::uint64_t>(1, totals.found)));
     const double switches =
@@ -410,14 +429,10 @@ int main(int argc, char** argv) {
                 "%llu, at images level %.2f%% of that\n",
                 100.0 * static_cast<double>(totals.touchingImages) /
                     static_cast<double>(std::max<std::uint64_t>(1, totals.markerImages)),
-                static_cast<unsigned long long>(totals.foundFromExactBlobs),
-                100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /
-                    static_cast<double>(std::max<std::uint64_t>(1, totals.foundFromExactBlobs)));
+                static_cast<unsigned long long>(totals.foundFromExactBlobs), 100.0 * foundOfExact);
     std::printf("  split blobs' parts: %llu at a marker, RMS %.3f px from its true centre; %llu "
                 "astray\n",
-                static_cast<unsigned long long>(totals.splitParts),
-                std::sqrt(totals.splitSquaredError /
-                          static_cast<double>(std::max<std::uint64_t>(1, totals.splitParts))),
+                static_cast<unsigned long long>(totals.splitParts), splitRms,
                 static_cast<unsigned long long>(totals.splitPartsAstray));
     std::printf(
         "  markers cut by a hand's edge in their image: %llu; a blob within 1.5 px for %llu, "
@@ -497,6 +512,18 @@ int main(int argc, char** argv) {
     }
     if (requireSwitches >= 0.0 && switches > requireSwitches) {
         std::printf("FAIL: switches %.6f > %.6f\n", switches, requireSwitches);
+        ok = false;
+    }
+    if (requireFoundOfExact >= 0.0 && foundOfExact < requireFoundOfExact) {
+        std::printf("FAIL: found of exact %.4f < %.4f\n", foundOfExact, requireFoundOfExact);
+        ok = false;
+    }
+    if (requireFalseOfAll >= 0.0 && falseOfAll > requireFalseOfAll) {
+        std::printf("FAIL: false of all %.4f > %.4f\n", falseOfAll, requireFalseOfAll);
+        ok = false;
+    }
+    if (requireSplitRms >= 0.0 && !(splitRms <= requireSplitRms)) {
+        std::printf("FAIL: split parts RMS %.3f px > %.3f px\n", splitRms, requireSplitRms);
         ok = false;
     }
     return ok ? 0 : 1;
