@@ -37,13 +37,14 @@ struct StereoConfig {
     /// markers on one epipolar line. 0 turns the test off (flat markers, which the two cameras
     /// see at different slants).
     double maxSizeMismatch = 0.10;
-    /// Two markers on one epipolar line, one of them hidden from one camera, leave the other
-    /// marker's blob two partners that both triangulate, and the correspondence may take the
-    /// wrong one. A point within this distance (mm) of where a point of the last frame was
-    /// expected (its last step carried on) continues it; a pair whose point continues nothing
-    /// gives way to another pair of its blobs whose point continues a point that had continued
-    /// for 20 frames (MarkerPipeline). 0 turns this off (frames that do not follow each other),
-    /// and with it the carrying of markers below.
+    /// Two markers on one epipolar line (one of them hidden from one camera, or both seen and
+    /// paired crosswise) leave blobs with two partners that both triangulate, and the
+    /// correspondence may take the wrong ones. A point within this distance (mm) of where a point
+    /// of the last frame was expected (its last step carried on) continues it; pairs give way to
+    /// other pairs of their blobs whose points continue points that had continued for 20 frames
+    /// and lie nearer, by more than a millimetre summed, to where the last frame's points were
+    /// expected, a point continuing none counting as this far off (MarkerPipeline). 0 turns this
+    /// off (frames that do not follow each other), and with it the carrying of markers below.
     double continuity_mm = 3.0;
     /// A marker that had continued for 20 frames and is now hidden in one image inside another
     /// marker's blob, while the other camera still sees it apart, is carried on for at most this
