@@ -69,14 +69,14 @@ void MarkerPipeline::matchStereo(StereoMethod method, const std::array<ImageView
         stereo_.match(blobs_[0].span(), blobs_[1].span(), markers_);
     indexMarkersByBlob();
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0)
-        preferContinuingPairs();
+        preferContinuingPairs(false);
     if (method == StereoMethod::Svd && config_.blobs.splitMerged && images[0].pixels != nullptr &&
         images[1].pixels != nullptr)
         splitOnEpipolarLines(images);
     // The split pass pairs the discs of merged blobs, two markers on one epipolar line in both
     // images crosswise as readily as the matcher does: its pairs are looked at again.
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0)
-        preferContinuingPairs();
+        preferContinuingPairs(true);
     if (config_.stereo.continuity_mm > 0.0)
         noteContinuedPoints();
     if (method == StereoMethod::Svd && config_.stereo.continuity_mm > 0.0 &&
@@ -212,7 +212,7 @@ double MarkerPipeline::continuedDistance(const Vec3& point_rig_mm, std::size_t m
     return distance_mm;
 }
 
-void MarkerPipeline::preferContinuingPairs() {
+void MarkerPipeline::preferContinuingPairs(bool afterSplit) {
     if (last_.empty())
         return;
     const double reach_mm = config_.stereo.continuity_mm;
@@ -223,16 +223,23 @@ void MarkerPipeline::preferContinuingPairs() {
     continuation_mm_.clear();
     for (const StereoMarker& marker : markers_)
         continuation_mm_.push_back(cost(distanceToLastFrame(marker.position_rig_mm)));
-    // Every blob's place in rectified coordinates from its centre now: after the split pass,
-    // stereo has prepared none for the parts it added, and a member centred anew has left its
-    // own.
+    // Every blob's place in rectified coordinates: stereo's, which it prepared from the blobs as
+    // they stand right after it; after the split pass, from each centre now, as stereo has
+    // prepared none for the parts the split added and a member centred anew has left its own.
     for (int camera = 0; camera < 2; ++camera) {
         BoundedVector<Vec2>& rectified = rectified_px_[index(camera)];
         rectified.clear();
-        for (const Blob& blob : blobs_[index(camera)]) {
-            const std::optional<Ray> ray = stereo_.rig().camera(camera).ray(blob.centre_px);
-            const std::optional<Vec2> place =
-                ray ? stereo_.rig().rectifyDirection(ray->direction_rig) : std::nullopt;
+        for (std::size_t b = 0; b < blobs_[index(camera)].size(); ++b) {
+            Ray ray;
+            Vec2 prepared;
+            std::optional<Vec2> place;
+            if (!afterSplit) {
+                if (stereo_.preparedBlob(camera, static_cast<int>(b), ray, prepared))
+                    place = prepared;
+            } else if (const std::optional<Ray> fresh =
+                           stereo_.rig().camera(camera).ray(blobs_[index(camera)][b].centre_px)) {
+                place = stereo_.rig().rectifyDirection(fresh->direction_rig);
+            }
             rectified.push_back(place ? *place
                                       : Vec2::Constant(std::numeric_limits<double>::quiet_NaN()));
         }

@@ -148,8 +148,9 @@ private:
     /// off): a blob without a partner (two markers on one line, one hidden from the other
     /// camera), or the blob of another marker, which takes this marker's blob in exchange (two
     /// markers on one line, paired crosswise, whose ghosts may have gone on from frame to frame
-    /// as smoothly as markers, but not as close to the two markers' points).
-    void preferContinuingPairs();
+    /// as smoothly as markers, but not as close to the two markers' points). \a afterSplit: the
+    /// second time, when blobs may have been added or centred anew since stereo prepared them.
+    void preferContinuingPairs(bool afterSplit);
     /// After the split pass: a point of the last frame that had continued kMinContinuedFrames and
     /// that no marker continues now is carried on when one camera has a blob without a partner on
     /// whose ray it is expected (within StereoConfig::continuity_mm) and, in the other image,
