@@ -578,6 +578,31 @@ TEST(CalibrationCompletion, JoinsAPieceTiedByTwoSharedMarkersAndAGlimpse) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
+// Two pieces of one body, markers 0-6 and 6-10, that share only marker 6 (a car's roof and its
+// side, meeting at a corner): between them a tenth of a second in which the first piece's markers
+// 0-5 are seen with markers 7-9 of the second. The second piece lands on the first's marker and
+// three of its glimpses, four markers in one place: one shared marker anchors a tie the glimpses
+// make.
+TEST(CalibrationCompletion, JoinsAPieceTiedByOneSharedMarkerAndThreeGlimpses) {
+    const std::vector<Vec3> body = test::irregularLayout(11, 29, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 15, [](std::size_t, std::size_t m, double t) {
+            if (t < 4.0)
+                return m <= 6;
+            if (t < 4.1)
+                return m <= 5 || (m >= 7 && m <= 9);
+            return t >= 6.0 && m >= 6;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 6, 5)});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 1U);
+    EXPECT_EQ(completion.counters().joinedByLayout, 1U);
+    EXPECT_EQ(out[0].markers_model_mm.size(), body.size());
+    EXPECT_LT(layoutError_mm(out[0], body), 0.1);
+}
+
 // Two pieces of one body that share exactly three markers, seen twenty seconds apart with
 // nothing in view between: no frame poses both and no chain of frames leads from one to the
 // other. The triangle they share, like no other of either, is the only tie, and it holds.
