@@ -149,6 +149,233 @@ std::vector<bool> foundMarkers(const sim::Observation& observation, std::span<co
     return found;
 }
 
+/// What every render of one evaluation shares.
+struct RenderRun {
+    std::string scene;
+    std::int64_t frames = 0;
+    std::string matcher;
+    MarkerPipelineConfig pipeline;
+    FrameToFrameConfig track;
+};
+
+/// Runs render \a seed of the scene (its own world, pipeline and tracker) and adds its counts to
+/// \a totals; false when there is no such scene.
+bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
+    const std::string& matcher = run.matcher;
+    std::optional<sim::Scene> scene = sim::makeScene(run.scene, seed);
+    if (!scene)
+        return false;
+    const sim::World world(std::move(*scene), seed);
+    test::SimImagePipeline images(world, seed, run.pipeline);
+    const MarkerPipeline& pipeline = images.pipeline();
+    // The same stereo on exact blobs: each visible marker's true centre, nothing merged.
+    MarkerPipeline exactBlobs(world.rig(), run.pipeline);
+    MarkerTracker tracker(run.track);
+    std::vector<Vec3> points;
+    sim::Observation observation;
+    std::vector<int> visible;
+    // Truth marker (object * 1000 + marker) -> tracker ID in the previous frame, and back.
+    std::map<int, std::uint32_t> idOfTruth, previousIdOfTruth;
+    std::map<std::uint32_t, int> truthOfId, previousTruthOfId;
+
+    for (std::int64_t f = 0; f < run.frames; ++f) {
+        const auto frame = static_cast<std::uint64_t>(f);
+        world.observe(frame, observation);
+        images.run(observation, frame,
+                   matcher == "epipolar" ? StereoMethod::EpipolarOnly : StereoMethod::Svd, points);
+        const std::span<const TrackedMarker> tracked = tracker.update(observation.time_s, points);
+
+        sim::separatelyVisible(observation, visible);
+        for (const sim::MarkerView& m : observation.markers)
+            totals.visibleToBoth += (m.visible[0] && m.visible[1]) ? 1u : 0u;
+
+        for (int c = 0; c < 2; ++c) {
+            const auto camera = static_cast<std::size_t>(c);
+            BoundedVector<Blob>& blobs = exactBlobs.blobs(c);
+            blobs.clear();
+            for (const sim::MarkerView& m : observation.markers) {
+                if (!m.visible[camera])
+                    continue;
+                Blob b;
+                b.centre_px = m.pixel[camera];
+                blobs.push_back(b);
+                ++totals.markerImages;
+                for (const sim::MarkerView& other : observation.markers)
+                    if (&other != &m && other.visible[camera] &&
+                        (other.pixel[camera] - m.pixel[camera]).norm() <
+                            m.radius_px[camera] + other.radius_px[camera]) {
+                        ++totals.touchingImages;
+                        break;
+                    }
+            }
+            for (const sim::MarkerView& m : observation.markers) {
+                if (!m.visible[camera])
+                    continue;
+                bool cut = false;
+                for (const sim::OccluderView& o : observation.occluders[camera])
+                    cut = cut || (o.depth_mm < m.depth_mm[camera] &&
+                                  (m.pixel[camera] - o.centre_px).norm() <
+                                      o.radius_px + m.radius_px[camera]);
+                if (!cut)
+                    continue;
+                ++totals.cutImages;
+                if (const Blob* b = blobAt(pipeline.blobs(c).span(), m.pixel[camera])) {
+                    ++totals.cutWithBlob;
+                    totals.cutCentredByArc += b->cut ? 1U : 0U;
+                    totals.cutSquaredError += (b->centre_px - m.pixel[camera]).squaredNorm();
+                }
+            }
+            for (const Blob& b : pipeline.blobs(c)) {
+                if (!b.split)
+                    continue;
+                double nearest = 1e9;
+                for (const sim::MarkerView& m : observation.markers)
+                    if (m.visible[camera])
+                        nearest = std::min(nearest, (m.pixel[camera] - b.centre_px).norm());
+                if (nearest < kAtMarker_px) {
+                    ++totals.splitParts;
+                    totals.splitSquaredError += nearest * nearest;
+                } else {
+                    ++totals.splitPartsAstray;
+                }
+            }
+        }
+        exactBlobs.matchStereo();
+        {
+            const std::vector<bool> exact = foundMarkers(observation, exactBlobs.points_rig_mm());
+            totals.foundFromExactBlobs +=
+                static_cast<std::uint64_t>(std::count(exact.begin(), exact.end(), true));
+            const std::vector<bool> atImages = foundMarkers(observation, points);
+            for (std::size_t i = 0; i < observation.markers.size(); ++i) {
+                if (!exact[i])
+                    continue;
+                const sim::MarkerView& m = observation.markers[i];
+                double separation = 1e9;
+                bool withoutBlob = false;
+                for (std::size_t c = 0; c < 2; ++c) {
+                    for (const sim::MarkerView& other : observation.markers)
+                        if (&other != &m && other.visible[c])
+                            separation =
+                                std::min(separation, (other.pixel[c] - m.pixel[c]).norm() /
+                                                         (m.radius_px[c] + other.radius_px[c]));
+                    withoutBlob = withoutBlob || blobAt(pipeline.blobs(static_cast<int>(c)).span(),
+                                                        m.pixel[c]) == nullptr;
+                }
+                const std::size_t bin = separationBin(separation);
+                ++totals.exactBySeparation[bin];
+                // Its centre behind a nearer marker's sphere in some image: a crescent at most.
+                bool hidden = false;
+                for (std::size_t c = 0; c < 2; ++c)
+                    for (const sim::MarkerView& other : observation.markers)
+                        hidden =
+                            hidden || (&other != &m && other.visible[c] &&
+                                       other.depth_mm[c] < m.depth_mm[c] &&
+                                       (other.pixel[c] - m.pixel[c]).norm() < other.radius_px[c]);
+                totals.exactBehindMarker += hidden ? 1U : 0U;
+                totals.lostBehindMarker += hidden && !atImages[i] ? 1U : 0U;
+                if (!atImages[i]) {
+                    ++totals.lostBySeparation[bin];
+                    totals.lostWithoutBlob[bin] += withoutBlob ? 1U : 0U;
+                }
+            }
+        }
+        const std::size_t markerCount = observation.markers.size();
+        std::vector<bool> used(points.size(), false);
+        idOfTruth.clear();
+        truthOfId.clear();
+        for (const int source : visible) {
+            if (static_cast<std::size_t>(source) >= markerCount)
+                continue; // a spurious reflective point: real, but not a marker
+            const sim::MarkerView& truth = observation.markers[static_cast<std::size_t>(source)];
+            ++totals.separatelyVisible;
+            int nearest = -1;
+            double nearestDistance = kFoundRadius_mm;
+            for (std::size_t k = 0; k < points.size(); ++k) {
+                const double d = (points[k] - truth.position_rig_mm).norm();
+                if (!used[k] && d < nearestDistance) {
+                    nearestDistance = d;
+                    nearest = static_cast<int>(k);
+                }
+            }
+            if (nearest < 0) {
+                // Why: no blob where the marker projects (merged, rejected), or stereo missed
+                // it.
+                bool blobs = true;
+                for (int c = 0; c < 2; ++c)
+                    blobs = blobs && blobAt(pipeline.blobs(c).span(),
+                                            truth.pixel[static_cast<std::size_t>(c)]) != nullptr;
+                ++(blobs ? totals.missedByStereo : totals.missedNoBlob);
+                continue;
+            }
+            used[static_cast<std::size_t>(nearest)] = true;
+            ++totals.found;
+            totals.squaredError += nearestDistance * nearestDistance;
+            totals.maxError = std::max(totals.maxError, nearestDistance);
+            if (matcher == "svd") {
+                const int key = truth.object * 1000 + truth.marker;
+                const std::uint32_t id = tracked[static_cast<std::size_t>(nearest)].id;
+                idOfTruth[key] = id;
+                truthOfId[id] = key;
+                if (auto before = previousIdOfTruth.find(key); before != previousIdOfTruth.end()) {
+                    ++totals.continuedMarkerFrames;
+                    if (before->second != id)
+                        ++totals.idBreaks;
+                }
+                if (auto before = previousTruthOfId.find(id);
+                    before != previousTruthOfId.end() && before->second != key)
+                    ++totals.idSwaps;
+            }
+        }
+        // Unclaimed reconstructions: near some true marker (merged or partly hidden) or a real
+        // spurious point they are not false; anything else is a false marker.
+        for (std::size_t k = 0; k < points.size(); ++k) {
+            if (used[k])
+                continue;
+            bool real = false, exact = false;
+            for (const sim::MarkerView& m : observation.markers) {
+                const double d = (m.position_rig_mm - points[k]).norm();
+                real = real || d < 3.0;
+                exact = exact || (d < kFoundRadius_mm && m.visible[0] && m.visible[1]);
+            }
+            totals.foundOfMerged += exact ? 1u : 0u;
+            bool spurious = false;
+            for (const sim::MarkerView& s : observation.spuriousPoints)
+                spurious = spurious || (s.position_rig_mm - points[k]).norm() < 3.0;
+            if (spurious) {
+                ++totals.spuriousPointsFound;
+            } else if (!real) {
+                ++totals.falseMarkers;
+                totals.falseCarried += pipeline.markers()[k].carried ? 1U : 0U;
+                const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
+                const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
+                if (seen0 >= 0 && seen1 >= 0)
+                    ++(seen0 == seen1 ? totals.falseOfOneMarker : totals.falseOfTwoMarkers);
+            }
+        }
+        previousIdOfTruth.swap(idOfTruth);
+        previousTruthOfId.swap(truthOfId);
+        ++totals.frames;
+    }
+    const StereoCounters& sc = pipeline.stereo().counters();
+    totals.stereo.largestBlock = std::max(totals.stereo.largestBlock, sc.largestBlock);
+    totals.stereo.blockOverflow += sc.blockOverflow;
+    totals.stereo.rejectedRayGap += sc.rejectedRayGap;
+    totals.stereo.rejectedReprojection += sc.rejectedReprojection;
+    const MarkerPipelineCounters pc = pipeline.counters();
+    totals.pipeline.splitOnLines += pc.splitOnLines;
+    totals.pipeline.splitAttemptsSkipped += pc.splitAttemptsSkipped;
+    totals.pipeline.pairsForContinuity += pc.pairsForContinuity;
+    totals.pipeline.carriedMarkers += pc.carriedMarkers;
+    totals.pipeline.markersSplitWhereExpected += pc.markersSplitWhereExpected;
+    const BlobCounters& bc = pipeline.detector(0).counters();
+    totals.blobs0.accepted += bc.accepted;
+    totals.blobs0.rejectedNotRound += bc.rejectedNotRound;
+    totals.blobs0.cutDiscs += bc.cutDiscs;
+    totals.blobs0.rejectedSmall += bc.rejectedSmall;
+    totals.blobs0.rejectedLarge += bc.rejectedLarge;
+    return true;
+}
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -198,229 +425,13 @@ int main(int argc, char** argv) {
 
     // Each render (scene seed) is run in turn and its counts pooled: the measures hold for the
     // renders as a set, which one seed's few hundred hard frames do not settle.
+    const RenderRun run{sceneName, frames, matcher, pipelineConfig, trackConfig};
     Totals totals;
-    for (std::uint64_t render = seed; render < seed + renders; ++render) {
-        std::optional<sim::Scene> scene = sim::makeScene(sceneName, render);
-        if (!scene) {
+    for (std::uint64_t render = seed; render < seed + renders; ++render)
+        if (!evaluateRender(run, render, totals)) {
             std::fprintf(stderr, "unknown scene %s\n", sceneName.c_str());
             return 2;
         }
-        const sim::World world(std::move(*scene), render);
-        test::SimImagePipeline images(world, render, pipelineConfig);
-        const MarkerPipeline& pipeline = images.pipeline();
-        // The same stereo on exact blobs: each visible marker's true centre, nothing merged.
-        MarkerPipeline exactBlobs(world.rig(), pipelineConfig);
-        MarkerTracker tracker(trackConfig);
-        std::vector<Vec3> points;
-        sim::Observation observation;
-        std::vector<int> visible;
-        // Truth marker (object * 1000 + marker) -> tracker ID in the previous frame, and back.
-        std::map<int, std::uint32_t> idOfTruth, previousIdOfTruth;
-        std::map<std::uint32_t, int> truthOfId, previousTruthOfId;
-
-        for (std::int64_t f = 0; f < frames; ++f) {
-            const auto frame = static_cast<std::uint64_t>(f);
-            world.observe(frame, observation);
-            images.run(observation, frame,
-                       matcher == "epipolar" ? StereoMethod::EpipolarOnly : StereoMethod::Svd,
-                       points);
-            const std::span<const TrackedMarker> tracked =
-                tracker.update(observation.time_s, points);
-
-            sim::separatelyVisible(observation, visible);
-            for (const sim::MarkerView& m : observation.markers)
-                totals.visibleToBoth += (m.visible[0] && m.visible[1]) ? 1u : 0u;
-
-            for (int c = 0; c < 2; ++c) {
-                const auto camera = static_cast<std::size_t>(c);
-                BoundedVector<Blob>& blobs = exactBlobs.blobs(c);
-                blobs.clear();
-                for (const sim::MarkerView& m : observation.markers) {
-                    if (!m.visible[camera])
-                        continue;
-                    Blob b;
-                    b.centre_px = m.pixel[camera];
-                    blobs.push_back(b);
-                    ++totals.markerImages;
-                    for (const sim::MarkerView& other : observation.markers)
-                        if (&other != &m && other.visible[camera] &&
-                            (other.pixel[camera] - m.pixel[camera]).norm() <
-                                m.radius_px[camera] + other.radius_px[camera]) {
-                            ++totals.touchingImages;
-                            break;
-                        }
-                }
-                for (const sim::MarkerView& m : observation.markers) {
-                    if (!m.visible[camera])
-                        continue;
-                    bool cut = false;
-                    for (const sim::OccluderView& o : observation.occluders[camera])
-                        cut = cut || (o.depth_mm < m.depth_mm[camera] &&
-                                      (m.pixel[camera] - o.centre_px).norm() <
-                                          o.radius_px + m.radius_px[camera]);
-                    if (!cut)
-                        continue;
-                    ++totals.cutImages;
-                    if (const Blob* b = blobAt(pipeline.blobs(c).span(), m.pixel[camera])) {
-                        ++totals.cutWithBlob;
-                        totals.cutCentredByArc += b->cut ? 1U : 0U;
-                        totals.cutSquaredError += (b->centre_px - m.pixel[camera]).squaredNorm();
-                    }
-                }
-                for (const Blob& b : pipeline.blobs(c)) {
-                    if (!b.split)
-                        continue;
-                    double nearest = 1e9;
-                    for (const sim::MarkerView& m : observation.markers)
-                        if (m.visible[camera])
-                            nearest = std::min(nearest, (m.pixel[camera] - b.centre_px).norm());
-                    if (nearest < kAtMarker_px) {
-                        ++totals.splitParts;
-                        totals.splitSquaredError += nearest * nearest;
-                    } else {
-                        ++totals.splitPartsAstray;
-                    }
-                }
-            }
-            exactBlobs.matchStereo();
-            {
-                const std::vector<bool> exact =
-                    foundMarkers(observation, exactBlobs.points_rig_mm());
-                totals.foundFromExactBlobs +=
-                    static_cast<std::uint64_t>(std::count(exact.begin(), exact.end(), true));
-                const std::vector<bool> atImages = foundMarkers(observation, points);
-                for (std::size_t i = 0; i < observation.markers.size(); ++i) {
-                    if (!exact[i])
-                        continue;
-                    const sim::MarkerView& m = observation.markers[i];
-                    double separation = 1e9;
-                    bool withoutBlob = false;
-                    for (std::size_t c = 0; c < 2; ++c) {
-                        for (const sim::MarkerView& other : observation.markers)
-                            if (&other != &m && other.visible[c])
-                                separation =
-                                    std::min(separation, (other.pixel[c] - m.pixel[c]).norm() /
-                                                             (m.radius_px[c] + other.radius_px[c]));
-                        withoutBlob =
-                            withoutBlob || blobAt(pipeline.blobs(static_cast<int>(c)).span(),
-                                                  m.pixel[c]) == nullptr;
-                    }
-                    const std::size_t bin = separationBin(separation);
-                    ++totals.exactBySeparation[bin];
-                    // Its centre behind a nearer marker's sphere in some image: a crescent at most.
-                    bool hidden = false;
-                    for (std::size_t c = 0; c < 2; ++c)
-                        for (const sim::MarkerView& other : observation.markers)
-                            hidden = hidden ||
-                                     (&other != &m && other.visible[c] &&
-                                      other.depth_mm[c] < m.depth_mm[c] &&
-                                      (other.pixel[c] - m.pixel[c]).norm() < other.radius_px[c]);
-                    totals.exactBehindMarker += hidden ? 1U : 0U;
-                    totals.lostBehindMarker += hidden && !atImages[i] ? 1U : 0U;
-                    if (!atImages[i]) {
-                        ++totals.lostBySeparation[bin];
-                        totals.lostWithoutBlob[bin] += withoutBlob ? 1U : 0U;
-                    }
-                }
-            }
-            const std::size_t markerCount = observation.markers.size();
-            std::vector<bool> used(points.size(), false);
-            idOfTruth.clear();
-            truthOfId.clear();
-            for (const int source : visible) {
-                if (static_cast<std::size_t>(source) >= markerCount)
-                    continue; // a spurious reflective point: real, but not a marker
-                const sim::MarkerView& truth =
-                    observation.markers[static_cast<std::size_t>(source)];
-                ++totals.separatelyVisible;
-                int nearest = -1;
-                double nearestDistance = kFoundRadius_mm;
-                for (std::size_t k = 0; k < points.size(); ++k) {
-                    const double d = (points[k] - truth.position_rig_mm).norm();
-                    if (!used[k] && d < nearestDistance) {
-                        nearestDistance = d;
-                        nearest = static_cast<int>(k);
-                    }
-                }
-                if (nearest < 0) {
-                    // Why: no blob where the marker projects (merged, rejected), or stereo missed
-                    // it.
-                    bool blobs = true;
-                    for (int c = 0; c < 2; ++c)
-                        blobs =
-                            blobs && blobAt(pipeline.blobs(c).span(),
-                                            truth.pixel[static_cast<std::size_t>(c)]) != nullptr;
-                    ++(blobs ? totals.missedByStereo : totals.missedNoBlob);
-                    continue;
-                }
-                used[static_cast<std::size_t>(nearest)] = true;
-                ++totals.found;
-                totals.squaredError += nearestDistance * nearestDistance;
-                totals.maxError = std::max(totals.maxError, nearestDistance);
-                if (matcher == "svd") {
-                    const int key = truth.object * 1000 + truth.marker;
-                    const std::uint32_t id = tracked[static_cast<std::size_t>(nearest)].id;
-                    idOfTruth[key] = id;
-                    truthOfId[id] = key;
-                    if (auto before = previousIdOfTruth.find(key);
-                        before != previousIdOfTruth.end()) {
-                        ++totals.continuedMarkerFrames;
-                        if (before->second != id)
-                            ++totals.idBreaks;
-                    }
-                    if (auto before = previousTruthOfId.find(id);
-                        before != previousTruthOfId.end() && before->second != key)
-                        ++totals.idSwaps;
-                }
-            }
-            // Unclaimed reconstructions: near some true marker (merged or partly hidden) or a real
-            // spurious point they are not false; anything else is a false marker.
-            for (std::size_t k = 0; k < points.size(); ++k) {
-                if (used[k])
-                    continue;
-                bool real = false, exact = false;
-                for (const sim::MarkerView& m : observation.markers) {
-                    const double d = (m.position_rig_mm - points[k]).norm();
-                    real = real || d < 3.0;
-                    exact = exact || (d < kFoundRadius_mm && m.visible[0] && m.visible[1]);
-                }
-                totals.foundOfMerged += exact ? 1u : 0u;
-                bool spurious = false;
-                for (const sim::MarkerView& s : observation.spuriousPoints)
-                    spurious = spurious || (s.position_rig_mm - points[k]).norm() < 3.0;
-                if (spurious) {
-                    ++totals.spuriousPointsFound;
-                } else if (!real) {
-                    ++totals.falseMarkers;
-                    totals.falseCarried += pipeline.markers()[k].carried ? 1U : 0U;
-                    const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
-                    const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
-                    if (seen0 >= 0 && seen1 >= 0)
-                        ++(seen0 == seen1 ? totals.falseOfOneMarker : totals.falseOfTwoMarkers);
-                }
-            }
-            previousIdOfTruth.swap(idOfTruth);
-            previousTruthOfId.swap(truthOfId);
-            ++totals.frames;
-        }
-        const StereoCounters& sc = pipeline.stereo().counters();
-        totals.stereo.largestBlock = std::max(totals.stereo.largestBlock, sc.largestBlock);
-        totals.stereo.blockOverflow += sc.blockOverflow;
-        totals.stereo.rejectedRayGap += sc.rejectedRayGap;
-        totals.stereo.rejectedReprojection += sc.rejectedReprojection;
-        const MarkerPipelineCounters pc = pipeline.counters();
-        totals.pipeline.splitOnLines += pc.splitOnLines;
-        totals.pipeline.splitAttemptsSkipped += pc.splitAttemptsSkipped;
-        totals.pipeline.pairsForContinuity += pc.pairsForContinuity;
-        totals.pipeline.carriedMarkers += pc.carriedMarkers;
-        totals.pipeline.markersSplitWhereExpected += pc.markersSplitWhereExpected;
-        const BlobCounters& bc = pipeline.detector(0).counters();
-        totals.blobs0.accepted += bc.accepted;
-        totals.blobs0.rejectedNotRound += bc.rejectedNotRound;
-        totals.blobs0.cutDiscs += bc.cutDiscs;
-        totals.blobs0.rejectedSmall += bc.rejectedSmall;
-        totals.blobs0.rejectedLarge += bc.rejectedLarge;
-    }
 
     const double foundShare =
         static_cast<double>(totals.found) /
