@@ -37,6 +37,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                                        std::span<MarkerModel> out) {
     counters_ = {};
     precision_.clear();
+    untiedPieces_.clear();
     bodies_.clear();
     nextBodyId_ = 0;
     sminLayoutOf_.clear();
@@ -120,8 +121,8 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
 
     const auto minFramesInFour =
         static_cast<std::uint32_t>(std::ceil(config_.minModelSeen_s * frameRate_hz_ - 1e-6));
-    std::vector<const Body*> done;
-    for (const Body& body : bodies_) {
+    std::vector<Body*> done;
+    for (Body& body : bodies_) {
         if (!body.alive || body.markers_mm.size() < config_.minModelMarkers)
             continue;
         if (!body.seenInFour(config_.minModelMarkers, minFramesInFour)) {
@@ -133,12 +134,12 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
     std::stable_sort(done.begin(), done.end(), [](const Body* a, const Body* b) {
         return a->markers_mm.size() > b->markers_mm.size();
     });
+    if (done.size() > out.size()) {
+        counters_.modelOverflow += done.size() - out.size();
+        done.resize(out.size());
+    }
     std::size_t count = 0;
     for (const Body* body : done) {
-        if (count == out.size()) {
-            ++counters_.modelOverflow;
-            continue;
-        }
         MarkerModel& model = out[count];
         model.clear();
         model.id = static_cast<std::uint32_t>(count);
@@ -154,6 +155,17 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
         ++count;
     }
     computeSmin(out.first(count), config_.smin);
+
+    // Pieces of one object that nothing tied: the user is told, as the session cannot mend it.
+    for (Body* body : done)
+        placeTracks(session, *body);
+    for (std::size_t i = 0; i < count; ++i)
+        for (std::size_t j = i + 1; j < count; ++j)
+            if (const std::size_t shared = sharedMarkers(*done[i], *done[j]);
+                shared >= 2 && !done[i]->isApartFrom(done[j]->id)) {
+                untiedPieces_.push_back({i, j, shared});
+                ++counters_.untiedPieces;
+            }
     return count;
 }
 

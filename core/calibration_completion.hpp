@@ -153,10 +153,29 @@ struct CompletionCounters {
     /// Markers dropped at the end because no frame fixed them to the rest of their body (see
     /// rigidGroupsOf: tied by markers on one line at most).
     std::uint64_t markersNotFixed = 0;
+    /// Pairs of models written that hold two or more of the same markers (UntiedPieces).
+    std::uint64_t untiedPieces = 0;
     /// Refused for lack of room: places, models, markers of a model.
     std::uint64_t siteOverflow = 0;
     std::uint64_t modelOverflow = 0;
     std::uint64_t markerOverflow = 0;
+};
+
+/**
+ * \brief Two models written that hold the same markers, yet no frame tied them into one layout.
+ *
+ * Points followed from frame to frame sat on markers of both, so both are pieces of one object;
+ * but they share fewer than three such markers off one line, and no frame showed enough of both
+ * to fix how the one turns against the other. The session cannot make one model of them: the
+ * user has to show the object again, turning it so that the markers between the pieces are in
+ * view together.
+ */
+struct UntiedPieces {
+    /// The two models, by id (index into run()'s output), the larger first.
+    std::size_t first = 0;
+    std::size_t second = 0;
+    /// Markers of the one that are markers of the other too.
+    std::size_t sharedMarkers = 0;
 };
 
 /**
@@ -196,6 +215,9 @@ public:
     const CompletionCounters& counters() const { return counters_; }
     /// \brief Per model written by the last run() (by id): how closely the session fixed it.
     std::span<const LayoutPrecision> precision() const { return precision_; }
+    /// \brief The models written by the last run() that are pieces of one object (see
+    /// UntiedPieces).
+    std::span<const UntiedPieces> untiedPieces() const { return untiedPieces_; }
 
 private:
     /// An object as completion knows it: markers in its own frame (mm) and, per session frame,
@@ -345,6 +367,9 @@ private:
     void linkPointTracks(const SessionBuffer& session);
     /// \brief Body::trackPlaces of \a body from its poses.
     void placeTracks(const SessionBuffer& session, Body& body) const;
+    /// \brief How many markers of \a a are markers of \b b too: tracks that sat on a marker of
+    /// each, in pairs as far apart in both layouts (Body::trackPlaces must be current).
+    std::size_t sharedMarkers(const Body& a, const Body& b) const;
     /// \brief b's frame to a's, when three or more point tracks, not on one line, sat at one
     /// place in each piece's frame (one physical point, followed from one piece's poses to the
     /// other's) and those places agree as one rigid layout.
@@ -394,6 +419,7 @@ private:
     bool valid_ = false;
     CompletionCounters counters_{};
     std::vector<LayoutPrecision> precision_;
+    std::vector<UntiedPieces> untiedPieces_;
     std::vector<Body> bodies_;
     /// The alive bodies' models as trackAll() last tracked them (bodies_ order).
     std::vector<MarkerModel> roundModels_;

@@ -2,6 +2,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
+#include <vector>
 
 #include "core/calibration_completion.hpp"
 #include "core/completion_geometry.hpp"
@@ -192,6 +194,57 @@ std::optional<RigidTransform> CalibrationCompletion::tiedByTracks(const Body& a,
     if (from.size() == 3 && fit->rms_mm > kTriangleTie.precision_mm)
         return std::nullopt;
     return fit->transform;
+}
+
+std::size_t CalibrationCompletion::sharedMarkers(const Body& a, const Body& b) const {
+    // The marker of a body a track's place lies on, if any: a place off every marker is a
+    // glimpse or a point that rode along, which says nothing of the two being one object.
+    auto markerAt = [](const Body& body, const Vec3& place_mm) -> std::optional<std::size_t> {
+        for (std::size_t m = 0; m < body.markers_mm.size(); ++m)
+            if ((body.markers_mm[m] - place_mm).norm() <= kTrackTieTolerance_mm)
+                return m;
+        return std::nullopt;
+    };
+    struct Shared {
+        std::size_t ofA, ofB;
+    };
+    std::vector<Shared> shared;
+    const auto& pa = a.trackPlaces;
+    const auto& pb = b.trackPlaces;
+    for (std::size_t i = 0, j = 0; i < pa.size() && j < pb.size();) {
+        if (pa[i].track < pb[j].track) {
+            ++i;
+        } else if (pb[j].track < pa[i].track) {
+            ++j;
+        } else {
+            const std::optional<std::size_t> ma = markerAt(a, pa[i++].place_mm);
+            const std::optional<std::size_t> mb = markerAt(b, pb[j++].place_mm);
+            const bool known = std::any_of(shared.begin(), shared.end(), [&](const Shared& s) {
+                return s.ofA == ma || s.ofB == mb;
+            });
+            if (ma && mb && !known)
+                shared.push_back({*ma, *mb});
+        }
+    }
+    // One marker on both is one track that jumped, as markers of two objects passing close can;
+    // two or more, as far apart in both layouts, are the same points. The largest such set.
+    std::size_t most = 0;
+    for (std::size_t seed = 0; seed < shared.size(); ++seed) {
+        std::vector<Shared> agreeing{shared[seed]};
+        for (std::size_t k = 0; k < shared.size(); ++k) {
+            if (k == seed)
+                continue;
+            const bool fits = std::all_of(agreeing.begin(), agreeing.end(), [&](const Shared& s) {
+                const double inA = (a.markers_mm[s.ofA] - a.markers_mm[shared[k].ofA]).norm();
+                const double inB = (b.markers_mm[s.ofB] - b.markers_mm[shared[k].ofB]).norm();
+                return std::abs(inA - inB) <= kTrackTieTolerance_mm;
+            });
+            if (fits)
+                agreeing.push_back(shared[k]);
+        }
+        most = std::max(most, agreeing.size());
+    }
+    return most;
 }
 
 } // namespace edgetrack

@@ -42,6 +42,8 @@ void CalibrationFinisher::start(CalibrationSession& session, std::vector<NamedMo
         result.completion = session.completionCounters();
         const std::span<const LayoutPrecision> precision = session.completionPrecision();
         result.precision.assign(precision.begin(), precision.end());
+        const std::span<const UntiedPieces> untied = session.completionUntiedPieces();
+        result.untiedPieces.assign(untied.begin(), untied.end());
         if (!learnt.empty()) {
             result.merged = mergeLearntModels(known, learnt, maxModels, shape);
             result.saved = store.save(result.merged.models);

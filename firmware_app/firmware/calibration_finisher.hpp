@@ -32,6 +32,8 @@ struct FinishedCalibration {
     /// Per learnt model: how closely the session fixed its layout (merged.learntIndex says which
     /// model of the new set each is).
     std::vector<LayoutPrecision> precision;
+    /// Learnt models (by learnt index) that are pieces of one object the session did not tie.
+    std::vector<UntiedPieces> untiedPieces;
     /// Whether the new set reached flash (only tried when learnt > 0).
     Status saved = Ok{};
     /// Wall time the worker took (s), completion, merge and save.

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 
 #include "core/marker_set.hpp"
 #include "firmware_app/firmware/model_merge.hpp"
@@ -324,6 +325,24 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
     text += " markers)";
     if (!fixedTo.empty())
         text += "; layouts fixed, RMS: " + fixedTo;
+    // Pieces of one object the session could not tie: the user must show it again.
+    auto idOfLearnt = [&](std::size_t learnt) -> std::optional<std::uint32_t> {
+        for (std::size_t i = 0; i < merge.models.size(); ++i)
+            if (merge.learntIndex[i] == static_cast<int>(learnt))
+                return merge.models[i].model.id;
+        return std::nullopt;
+    };
+    for (const UntiedPieces& pieces : finished.untiedPieces) {
+        const std::optional<std::uint32_t> first = idOfLearnt(pieces.first);
+        const std::optional<std::uint32_t> second = idOfLearnt(pieces.second);
+        if (!first || !second)
+            continue;
+        ++counters_.untiedPieces;
+        text += "; body " + std::to_string(*first) + " and body " + std::to_string(*second) +
+                " are pieces of one object (" + std::to_string(pieces.sharedMarkers) +
+                " shared markers, never tied): calibrate it again, turning it through the side "
+                "between them";
+    }
     if (merge.fragments > 0)
         text += "; " + std::to_string(merge.fragments) + " fragment" +
                 (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
@@ -789,6 +808,7 @@ std::string Firmware::statusReport() const {
     out += line;
     row("models refused (max_models)", c.modelOverflow);
     row("learnt fragments dropped", c.fragmentsDropped);
+    row("learnt pieces of one object untied", c.untiedPieces);
     row("model deletions", c.modelDeletions);
     row("rig calibrations started", c.rigCalibrationsStarted);
     row("rig calibrations adopted", c.rigCalibrationsAdopted);

@@ -103,6 +103,8 @@ struct FirmwareCounters {
     std::uint64_t modelOverflow = 0;
     /// Learnt objects whose layout is part of a body with more than twice their markers.
     std::uint64_t fragmentsDropped = 0;
+    /// Pairs of learnt models that are pieces of one object nothing in the session tied.
+    std::uint64_t untiedPieces = 0;
     std::uint64_t modelDeletions = 0;
     std::uint64_t flashErrors = 0;
     std::uint64_t rigCalibrationsStarted = 0;

@@ -116,6 +116,24 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
                     << ": told apart only by tracking them continuously)";
         summary << "\n";
     }
+    // Pieces of one object that the session could not tie: only the user can mend that.
+    auto fileOfLearnt = [&](std::size_t learnt) -> const MarkerModel* {
+        for (std::size_t i = 0; i < merged.models.size(); ++i)
+            if (merged.learntIndex[i] == static_cast<int>(learnt))
+                return &merged.models[i].model;
+        return nullptr;
+    };
+    for (const UntiedPieces& pieces : session.completionUntiedPieces()) {
+        const MarkerModel* first = fileOfLearnt(pieces.first);
+        const MarkerModel* second = fileOfLearnt(pieces.second);
+        if (first == nullptr || second == nullptr)
+            continue;
+        summary << "  body_" << first->id << ".json and body_" << second->id << ".json hold "
+                << pieces.sharedMarkers
+                << " of the same markers, but no frame showed enough of both to join them: "
+                   "pieces of one object; record it again, turning it so that the markers "
+                   "between the two are in view together\n";
+    }
     if (merged.fragments + merged.refused > 0)
         summary << "  dropped: " << merged.fragments << " fragments of a larger body, "
                 << merged.refused << " beyond max_models\n";

@@ -465,6 +465,7 @@ int main(int argc, char** argv) {
     const Report online = evaluate(std::span(models).first(count), layouts, expected);
     CompletionCounters completionCounters;
     std::vector<LayoutPrecision> precision;
+    std::vector<UntiedPieces> untied;
     double completion_s = 0.0;
     if (!onlineOnly) {
         const auto start = std::chrono::steady_clock::now();
@@ -475,6 +476,8 @@ int main(int argc, char** argv) {
         completionCounters = learning.completionCounters();
         const std::span<const LayoutPrecision> p = learning.completionPrecision();
         precision.assign(p.begin(), p.end());
+        const std::span<const UntiedPieces> u = learning.completionUntiedPieces();
+        untied.assign(u.begin(), u.end());
     }
     const Report final = evaluate(std::span(models).first(count), layouts, expected);
     double completeAt = -1.0;
@@ -523,6 +526,14 @@ int main(int argc, char** argv) {
     }
     std::printf("models %zu (objects in scene %zu), stray models %zu, false markers %zu\n",
                 final.models, layouts.size(), final.strayModels, final.falseMarkers);
+    // Completion's word that two models are pieces of one object, checked against the truth.
+    for (const UntiedPieces& u : untied)
+        if (u.second < final.objectOfModel.size())
+            std::printf("  untied pieces: models %zu and %zu share %zu markers (%s)\n", u.first,
+                        u.second, u.sharedMarkers,
+                        final.objectOfModel[u.first] == final.objectOfModel[u.second]
+                            ? "one object"
+                            : "two objects");
     for (std::size_t k = 0; k < final.objects.size(); ++k) {
         const ObjectReport& o = final.objects[k];
         std::printf("  object %zu (%s, %zu markers): models %d, found %zu of %zu in view >= %.1f s,"

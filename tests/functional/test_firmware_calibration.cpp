@@ -96,6 +96,10 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
         << firmware.lastEvent();
     EXPECT_NE(firmware.lastEvent().find(", saved to flash"), std::string::npos)
         << firmware.lastEvent();
+    // Two cubes are two objects, not pieces of one.
+    EXPECT_EQ(firmware.lastEvent().find("pieces of one object"), std::string::npos)
+        << firmware.lastEvent();
+    EXPECT_EQ(firmware.counters().untiedPieces, 0u);
     EXPECT_EQ(firmware.counters().calibrationsSaved, 1u);
     ModelStore store(sim->flash, MarkerSet::kCapacity);
     Result<StoredModels> stored = store.load();

@@ -603,6 +603,43 @@ TEST(CalibrationCompletion, JoinsAPieceTiedByOneSharedMarkerAndThreeGlimpses) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
+// Two pieces of one body, markers 0-6 and 5-9, that share markers 5 and 6: the first seen for
+// four seconds, then for half a second only the two shared markers, then the second piece. No
+// frame shows three markers of the one with a marker of the other, so nothing fixes how the
+// second turns about the line through 5 and 6 against the first: they stay two models. But the
+// shared markers were followed from point to point all along, from the one's poses into the
+// other's, and completion says the two are pieces of one object, which only showing it again can
+// mend. Two objects (the second scene) are not.
+TEST(CalibrationCompletion, SaysWhichModelsArePiecesOfOneObjectThatNothingTied) {
+    const std::vector<Vec3> body = test::irregularLayout(10, 31, 15.0);
+    const SessionBuffer session =
+        sessionWhere({body}, 10.0, 0.05, 16, [](std::size_t, std::size_t m, double t) {
+            if (t < 4.0)
+                return m <= 6;
+            return t < 4.5 ? m == 5 || m == 6 : m >= 5;
+        });
+    const CompletionConfig config;
+    CalibrationCompletion completion(config);
+    const std::vector<MarkerModel> seeds = modelsOf({subset(body, 0, 7), subset(body, 5, 5)});
+    std::vector<MarkerModel> out = outputModels(config);
+    ASSERT_EQ(completion.run(session, seeds, out), 2U);
+    EXPECT_LT(layoutError_mm(out[0], subset(body, 0, 7)), 0.1);
+    EXPECT_LT(layoutError_mm(out[1], subset(body, 5, 5)), 0.1);
+    ASSERT_EQ(completion.untiedPieces().size(), 1U);
+    EXPECT_EQ(completion.untiedPieces()[0].first, 0U);
+    EXPECT_EQ(completion.untiedPieces()[0].second, 1U);
+    EXPECT_EQ(completion.untiedPieces()[0].sharedMarkers, 2U);
+    EXPECT_EQ(completion.counters().untiedPieces, 1U);
+
+    const std::vector<Vec3> other = test::irregularLayout(8, 32, 15.0);
+    const SessionBuffer two = sessionWhere({body, other}, 10.0, 0.05, 17,
+                                           [](std::size_t, std::size_t, double) { return true; });
+    std::vector<MarkerModel> outOfTwo = outputModels(config);
+    ASSERT_EQ(completion.run(two, modelsOf({body, other}), outOfTwo), 2U);
+    EXPECT_TRUE(completion.untiedPieces().empty());
+    EXPECT_EQ(completion.counters().untiedPieces, 0U);
+}
+
 // Two pieces of one body that share exactly three markers, seen twenty seconds apart with
 // nothing in view between: no frame poses both and no chain of frames leads from one to the
 // other. The triangle they share, like no other of either, is the only tie, and it holds.
