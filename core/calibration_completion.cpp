@@ -109,13 +109,6 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                 changed = true;
             }
         }
-        // Bodies found in the points can be made of points of several objects that moved alike
-        // for a moment; until the end judged them, they claimed those points from their own
-        // bodies in every round (random_objects seed 95: a box whose fifth marker was seen only
-        // with three of its others, one of them held by such a body, which the follow step then
-        // could not use).
-        if (round == 0 && dropWhatDoesNotMoveWithItsBody(session))
-            changed = true;
     }
     // The poses must come from the models as they now are.
     if (changed) {
@@ -300,49 +293,6 @@ void CalibrationCompletion::trackAll(const SessionBuffer& session) {
             keepJoinedPosesThatStillFit(session, bodies_[b], was[b]);
 }
 
-double CalibrationCompletion::rigsTypicalResidual_mm2() const {
-    // The rig's noise, as the most rigid body shows it: the median over its markers of their
-    // typical squared residual.
-    double typical_mm2 = std::numeric_limits<double>::infinity();
-    std::vector<double> seen;
-    for (const Body& body : bodies_) {
-        if (!body.alive)
-            continue;
-        seen.clear();
-        for (const double r2 : body.markerResidual_mm2)
-            if (r2 > 0.0)
-                seen.push_back(r2);
-        if (seen.size() >= config_.minModelMarkers)
-            typical_mm2 = std::min(typical_mm2, medianOf(seen));
-    }
-    return typical_mm2;
-}
-
-bool CalibrationCompletion::dropWhatDoesNotMoveWithItsBody(const SessionBuffer& session) {
-    // One pass of the joint least squares measures the residuals: this judges the markers, it
-    // does not place them (settleLayouts does).
-    for (Body& body : bodies_)
-        if (body.alive)
-            refine(session, body, 1, true);
-    const double typical_mm2 = rigsTypicalResidual_mm2();
-    if (!std::isfinite(typical_mm2))
-        return false;
-    // Counted once, at the end: a marker dropped here that sits at its place again is measured
-    // afresh by the next round and judged again then.
-    const std::uint64_t markersCounted = counters_.markersNotRigid;
-    bool changed = false;
-    for (Body& body : bodies_) {
-        if (!body.alive || !dropMarkersThatDoNotMoveWithTheBody(body, typical_mm2))
-            continue;
-        changed = true;
-        // Its edges and counts by marker, which the next round reads, for the markers left.
-        if (body.alive)
-            refine(session, body, 1, true);
-    }
-    counters_.markersNotRigid = markersCounted;
-    return changed;
-}
-
 void CalibrationCompletion::settleLayouts(const SessionBuffer& session) {
     for (Body& body : bodies_)
         if (body.alive) {
@@ -350,10 +300,21 @@ void CalibrationCompletion::settleLayouts(const SessionBuffer& session) {
             if (mergeCrowdedMarkers(body))
                 refine(session, body, config_.refineIterations, true);
         }
-    // A marker whose points lie off its body's poses several times farther than the rig
-    // measures did not move with it (a point that rode along, a marker of another object), and a
-    // body all of whose markers do so is no rigid object (markers on skin).
-    const double typical_mm2 = rigsTypicalResidual_mm2();
+    // The rig's noise, as the most rigid body shows it: the median over its markers of their
+    // typical squared residual. A marker whose points lie off its body's poses several times
+    // farther did not move with it (a point that rode along, a marker of another object), and
+    // a body all of whose markers do so is no rigid object (markers on skin).
+    double typical_mm2 = std::numeric_limits<double>::infinity();
+    for (const Body& body : bodies_) {
+        if (!body.alive)
+            continue;
+        std::vector<double> seen;
+        for (const double r2 : body.markerResidual_mm2)
+            if (r2 > 0.0)
+                seen.push_back(r2);
+        if (seen.size() >= config_.minModelMarkers)
+            typical_mm2 = std::min(typical_mm2, medianOf(seen));
+    }
     if (!std::isfinite(typical_mm2))
         return;
     // Then the layout from the frames that fit as well as the rig measures: a frame posed

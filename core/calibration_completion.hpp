@@ -314,14 +314,6 @@ private:
     /// maxResidualRatio times \a typical_mm2, the rig's: they did not move with the body. A body
     /// left with fewer than minModelMarkers is no longer alive. Whether it changed the body.
     bool dropMarkersThatDoNotMoveWithTheBody(Body& body, double typical_mm2);
-    /// \brief The median over the most rigid alive body's markers of their typical squared
-    /// residual (refine() measured them), the rig's noise as the session shows it (mm^2);
-    /// infinity when no body has minModelMarkers markers measured.
-    double rigsTypicalResidual_mm2() const;
-    /// \brief After the first measurement: every body refined once and its markers that did not
-    /// move with it dropped (dropMarkersThatDoNotMoveWithTheBody), so that a body made of points
-    /// of several objects no longer claims them in the rounds. Whether any body changed.
-    bool dropWhatDoesNotMoveWithItsBody(const SessionBuffer& session);
     /// \brief The bodies' final layouts: refined over all their poses, then judged against the
     /// rig's noise (markers that did not move with their body, frames posed wrongly) and cut to
     /// what frames fix (keepTheLargestRigidGroup), each body's precision measured last.
