@@ -164,11 +164,11 @@ struct CompletionCounters {
 /**
  * \brief Two models written that hold the same markers, yet no frame tied them into one layout.
  *
- * Points followed from frame to frame sat on markers of both, so both are pieces of one object;
- * but they share fewer than three such markers off one line, and no frame showed enough of both
- * to fix how the one turns against the other. The session cannot make one model of them: the
- * user has to show the object again, turning it so that the markers between the pieces are in
- * view together.
+ * Points followed from frame to frame sat on two or more markers of both, so both are pieces of
+ * one object; yet no tie of the join step held: most often they share two markers, which leave
+ * the turn about the line through them open, and no frame showed enough of both to fix it. The
+ * session cannot make one model of them: the user has to show the object again, turning it so
+ * that the markers between the pieces are in view together.
  */
 struct UntiedPieces {
     /// The two models, by id (index into run()'s output), the larger first.
@@ -367,7 +367,7 @@ private:
     void linkPointTracks(const SessionBuffer& session);
     /// \brief Body::trackPlaces of \a body from its poses.
     void placeTracks(const SessionBuffer& session, Body& body) const;
-    /// \brief How many markers of \a a are markers of \b b too: tracks that sat on a marker of
+    /// \brief How many markers of \a a are markers of \a b too: tracks that sat on a marker of
     /// each, in pairs as far apart in both layouts (Body::trackPlaces must be current).
     std::size_t sharedMarkers(const Body& a, const Body& b) const;
     /// \brief b's frame to a's, when three or more point tracks, not on one line, sat at one

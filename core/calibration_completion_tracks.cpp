@@ -36,6 +36,20 @@ constexpr double kTrackTieTolerance_mm = 1.0;
 /// triangle is at least this tall over its longest side (mm).
 constexpr double kMinTieHeight_mm = 5.0;
 
+/// Calls \a both(place in a, place in b) for each track with a place in both \a a and \a b
+/// (each sorted by track): one physical point, seen from both bodies' poses.
+template <typename Places, typename Both>
+void forEachSharedTrack(const Places& a, const Places& b, Both both) {
+    for (std::size_t i = 0, j = 0; i < a.size() && j < b.size();) {
+        if (a[i].track < b[j].track)
+            ++i;
+        else if (b[j].track < a[i].track)
+            ++j;
+        else
+            both(a[i++].place_mm, b[j++].place_mm);
+    }
+}
+
 /// The height (mm) of the tallest triangle of \a points over its longest side.
 double widestTriangleHeight_mm(std::span<const Vec3> points) {
     double best = 0.0;
@@ -171,18 +185,10 @@ std::optional<RigidTransform> CalibrationCompletion::tiedByTracks(const Body& a,
     // Places of one track in both frames (b's, a's): one physical point, seen from both pieces'
     // poses.
     std::vector<Vec3> from, to;
-    const auto& pa = a.trackPlaces;
-    const auto& pb = b.trackPlaces;
-    for (std::size_t i = 0, j = 0; i < pa.size() && j < pb.size();) {
-        if (pa[i].track < pb[j].track) {
-            ++i;
-        } else if (pb[j].track < pa[i].track) {
-            ++j;
-        } else {
-            from.push_back(pb[j++].place_mm);
-            to.push_back(pa[i++].place_mm);
-        }
-    }
+    forEachSharedTrack(a.trackPlaces, b.trackPlaces, [&](const Vec3& inA, const Vec3& inB) {
+        from.push_back(inB);
+        to.push_back(inA);
+    });
     // The worst tie dropped while any lies off the fit: a track that jumped to another marker
     // in a frame it was not plain.
     const std::optional<RigidFit> fit = fitDroppingWorst(from, to, kTrackTieTolerance_mm);
@@ -209,23 +215,14 @@ std::size_t CalibrationCompletion::sharedMarkers(const Body& a, const Body& b) c
         std::size_t ofA, ofB;
     };
     std::vector<Shared> shared;
-    const auto& pa = a.trackPlaces;
-    const auto& pb = b.trackPlaces;
-    for (std::size_t i = 0, j = 0; i < pa.size() && j < pb.size();) {
-        if (pa[i].track < pb[j].track) {
-            ++i;
-        } else if (pb[j].track < pa[i].track) {
-            ++j;
-        } else {
-            const std::optional<std::size_t> ma = markerAt(a, pa[i++].place_mm);
-            const std::optional<std::size_t> mb = markerAt(b, pb[j++].place_mm);
-            const bool known = std::any_of(shared.begin(), shared.end(), [&](const Shared& s) {
-                return s.ofA == ma || s.ofB == mb;
-            });
-            if (ma && mb && !known)
-                shared.push_back({*ma, *mb});
-        }
-    }
+    forEachSharedTrack(a.trackPlaces, b.trackPlaces, [&](const Vec3& inA, const Vec3& inB) {
+        const std::optional<std::size_t> ma = markerAt(a, inA);
+        const std::optional<std::size_t> mb = markerAt(b, inB);
+        const bool known = std::any_of(shared.begin(), shared.end(),
+                                       [&](const Shared& s) { return s.ofA == ma || s.ofB == mb; });
+        if (ma && mb && !known)
+            shared.push_back({*ma, *mb});
+    });
     // One marker on both is one track that jumped, as markers of two objects passing close can;
     // two or more, as far apart in both layouts, are the same points. The largest such set.
     std::size_t most = 0;
