@@ -387,6 +387,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     std::vector<std::vector<double>> residuals(n);
     std::vector<double> scaled;
     std::vector<MarkerBits> viewSets;
+    std::size_t previousPosed = SIZE_MAX - 1;
+    MarkerBits previousSeen{};
     body.worstFrameResidual_mm2 = 0.0;
     struct Claim {
         const Vec3* point;
@@ -476,13 +478,19 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             for (std::size_t i = 0; i < scaled.size(); ++i)
                 residuals[which[i]].push_back(scaled[i]);
             if (judge && last) {
-                // The markers one frame fixes to each other. Not the frame before's as well: a
-                // pose carried across a handover by the turn of the frames before fixes nothing
-                // (random motion turns it off by tenths of a millimetre to millimetres).
                 MarkerBits seen{};
                 for (const std::size_t k : which)
                     add(seen, k);
-                viewSets.push_back(seen);
+                // A handover: the frame before, posed too, carries the pose on by continuity.
+                if (previousPosed + 1 == f) {
+                    MarkerBits joined = previousSeen;
+                    joined[0] |= seen[0];
+                    joined[1] |= seen[1];
+                    viewSets.push_back(joined);
+                } else
+                    viewSets.push_back(seen);
+                previousPosed = f;
+                previousSeen = seen;
             }
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)

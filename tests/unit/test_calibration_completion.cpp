@@ -487,35 +487,13 @@ TEST(CalibrationCompletion, JoinsTwoPiecesOfOneBodySeenTogetherOnlyBriefly) {
     EXPECT_LT(layoutError_mm(out[0], body), 0.1);
 }
 
-// Four markers of a body in view at a time, every quarter second one leaving as the next comes
-// in, as a turning object shows one side after another: the tracker loses the model (its first
-// four markers) as soon as one of them turns away, and no four markers are in view together long
-// enough to be found as a body of their own. Followed frame to frame on the three still in view,
-// every marker is learnt, and the joint least squares straightens the chain of sides.
-TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoOneAtATime) {
-    const std::vector<Vec3> body = test::irregularLayout(10, 18, 15.0);
-    const SessionBuffer session =
-        sessionWhere({body}, 10.0, 0.05, 8, [](std::size_t, std::size_t m, double t) {
-            const auto first = static_cast<std::size_t>(t / 0.25);
-            return (m + 10 - first % 10) % 10 < 4;
-        });
-    const CompletionConfig config;
-    CalibrationCompletion completion(config);
-    std::vector<MarkerModel> out = outputModels(config);
-    ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 4)}), out), 1U);
-    EXPECT_GT(completion.counters().framesFollowed, 0U);
-    // The largest error of the 45 distances: four alternations of pose fits and marker means
-    // straightened the chain only to 0.16 mm; the joint step of all poses and markers gets it
-    // under 0.05 mm.
-    EXPECT_LT(layoutError_mm(out[0], body), 0.05);
-}
-
-// The same, two markers coming as two leave: consecutive quarter seconds share two markers, and
-// only the turn carried across each handover from the frames before ties one side to the next.
-// No frame fixes it (under a hand's motion it is off by tenths of a millimetre to millimetres),
-// so the model keeps the side the frames fix, four markers in their true places, and drops the
-// rest as not fixed.
-TEST(CalibrationCompletion, KeepsWhatFramesFixWhereSidesHandOverByTwoMarkers) {
+// A body whose markers come into view two at a time as two others leave, every quarter second,
+// as a turning object shows one side after another: no frame holds three markers of the model and
+// three new ones, so the tracker loses the model as soon as its side turns away, and no four
+// markers are in view together long enough to be found as a body of their own. Followed frame to
+// frame (the turn about the two markers still in view carried on for a few frames), every side is
+// learnt.
+TEST(CalibrationCompletion, FollowsABodyWhoseMarkersComeAndGoTwoAtATime) {
     const std::vector<Vec3> body = test::irregularLayout(10, 18, 15.0);
     const SessionBuffer session =
         sessionWhere({body}, 10.0, 0.05, 8, [](std::size_t, std::size_t m, double t) {
@@ -526,17 +504,11 @@ TEST(CalibrationCompletion, KeepsWhatFramesFixWhereSidesHandOverByTwoMarkers) {
     CalibrationCompletion completion(config);
     std::vector<MarkerModel> out = outputModels(config);
     ASSERT_EQ(completion.run(session, modelsOf({subset(body, 0, 4)}), out), 1U);
-    EXPECT_EQ(out[0].markers_model_mm.size(), 4U);
-    EXPECT_GT(completion.counters().markersNotFixed, 0U);
-    // The four kept are four consecutive markers of the ring of sides, in their true places.
-    double best_mm = INFINITY;
-    for (std::size_t first = 0; first < body.size(); first += 2) {
-        std::vector<Vec3> side;
-        for (std::size_t k = 0; k < 4; ++k)
-            side.push_back(body[(first + k) % body.size()]);
-        best_mm = std::min(best_mm, layoutError_mm(out[0], side));
-    }
-    EXPECT_LT(best_mm, 0.05);
+    EXPECT_GT(completion.counters().framesFollowed, 0U);
+    // The largest error of the 45 distances: the sides form a chain, which four alternations of
+    // pose fits and marker means straightened only to 0.16 mm; the joint step of all poses and
+    // markers gets it under 0.05 mm.
+    EXPECT_LT(layoutError_mm(out[0], body), 0.05);
 }
 
 // Two pieces of one body that share four markers but are never in view together, and whose
