@@ -64,6 +64,23 @@ Vec2 CameraModel::distortNormalized(const Vec2& undistorted) const {
     return distortWithJacobian(intrinsics_.distortion, undistorted).distorted;
 }
 
+Eigen::Matrix2d CameraModel::distortionJacobian(const Vec2& undistorted) const {
+    return distortWithJacobian(intrinsics_.distortion, undistorted).jacobian;
+}
+
+double CameraModel::pixelsPerRadian(const Vec3& direction_rig) const {
+    const Vec3 d = extrinsics_.rotation_cam_from_rig * direction_rig;
+    const double length = d.norm();
+    if (!(d.z() > 1e-9 * length))
+        return 0.0;
+    const double cosTheta = d.z() / length;
+    const double det = distortionJacobian({d.x() / d.z(), d.y() / d.z()}).determinant();
+    if (!(det > 0.0))
+        return 0.0;
+    return std::sqrt(intrinsics_.fx_px * intrinsics_.fy_px * det /
+                     (cosTheta * cosTheta * cosTheta));
+}
+
 Vec2 CameraModel::pixelFromNormalized(const Vec2& normalized) const {
     return {intrinsics_.fx_px * normalized.x() + intrinsics_.cx_px,
             intrinsics_.fy_px * normalized.y() + intrinsics_.cy_px};

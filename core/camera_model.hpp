@@ -64,6 +64,24 @@ public:
     /// \brief Apply the lens distortion to undistorted normalized coordinates.
     Vec2 distortNormalized(const Vec2& undistorted) const;
 
+    /// \brief The 2x2 Jacobian of distortNormalized() at \a undistorted (no unit).
+    Eigen::Matrix2d distortionJacobian(const Vec2& undistorted) const;
+
+    /**
+     * \brief How large the image of a small sphere seen along \a direction_rig is: the radius
+     * (px) of the disc of the same area as its image, per radian of the sphere's angular radius.
+     *
+     * A sphere of radius R at range d subtends a cone of half-angle R / d. At an angle theta off
+     * the optical axis that cone cuts the normalized image plane in an ellipse of semi-axes
+     * (R / d) / cos(theta) across and (R / d) / cos^2(theta) along the radius, of area
+     * pi (R / d)^2 / cos^3(theta); the lens distortion then scales areas by its Jacobian's
+     * determinant, and the focal lengths by fx fy. So the disc radius of the image is (R / d)
+     * times sqrt(fx fy det J / cos^3(theta)), which this returns: on the axis of an undistorted
+     * lens it is the focal length.
+     * \return 0 when the direction looks away from the camera.
+     */
+    double pixelsPerRadian(const Vec3& direction_rig) const;
+
     /// \brief Map normalized (distorted or not) coordinates to pixels.
     Vec2 pixelFromNormalized(const Vec2& normalized) const;
 
