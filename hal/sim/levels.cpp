@@ -5,6 +5,8 @@
 #include <cmath>
 #include <numbers>
 
+#include <Eigen/SVD>
+
 namespace edgetrack::sim {
 
 namespace {
@@ -21,7 +23,8 @@ struct Spot {
 
 // Distance from a spot's centre at which its blurred edge falls to the detection level, from the
 // renderer's profile peak * erfc((rho - R) / (sqrt(2) sigma)) / 2.
-double reachAtDetectionLevel(double radius_px, double peak_dn) {
+double reachAtDetectionLevel(double radius_px, double peak_dn,
+                             double blur_px = FrameRenderer::kEdgeBlur_px) {
     const double target = 2.0 * kDetectionLevel_dn / peak_dn;
     if (target >= 2.0)
         return 0.0;                // never reaches the level: no blob at all
@@ -30,7 +33,7 @@ double reachAtDetectionLevel(double radius_px, double peak_dn) {
         const double mid = 0.5 * (low + high);
         (std::erfc(mid) > target ? low : high) = mid;
     }
-    return std::max(0.0, radius_px + std::numbers::sqrt2 * FrameRenderer::kEdgeBlur_px * low);
+    return std::max(0.0, radius_px + std::numbers::sqrt2 * blur_px * low);
 }
 
 // Spots whose discs touch (with the edge blur) form one blob; returns spots with group labels.
@@ -38,18 +41,20 @@ void groupSpots(const Observation& observation, int camera, std::vector<Spot>& s
     const auto c = static_cast<std::size_t>(camera);
     spots.clear();
     int source = 0;
-    for (const MarkerView& m : observation.markers) {
-        if (m.visible[c])
+    // An elliptic image reaches as far as its longer semi-axis (toward its neighbour or not).
+    const auto addView = [&](const MarkerView& m) {
+        if (m.visible[c]) {
+            const double major_px =
+                Eigen::JacobiSVD<Eigen::Matrix2d>(m.shape_px[c]).singularValues()(0);
             spots.push_back({m.pixel[c], m.radius_px[c], -1, source,
-                             reachAtDetectionLevel(m.radius_px[c], m.peak_dn[c])});
+                             reachAtDetectionLevel(major_px, m.peak_dn[c], m.blur_px[c])});
+        }
         ++source;
-    }
-    for (const MarkerView& m : observation.spuriousPoints) {
-        if (m.visible[c])
-            spots.push_back({m.pixel[c], m.radius_px[c], -1, source,
-                             reachAtDetectionLevel(m.radius_px[c], m.peak_dn[c])});
-        ++source;
-    }
+    };
+    for (const MarkerView& m : observation.markers)
+        addView(m);
+    for (const MarkerView& m : observation.spuriousPoints)
+        addView(m);
     // Every glint takes part in merging (a streak across a marker spoils it too), but only round
     // ones are reported as blobs.
     for (const Glint& g : observation.glints[c]) {

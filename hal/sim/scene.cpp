@@ -231,6 +231,28 @@ RigidTransform Motion::poseAt(double t_s) const {
 
 // ---------------------------------------------------------------------------------------------
 
+namespace {
+
+// A rig of any build: T_scene_from_camera for camera \a index (0 left, 1 right).
+RigidTransform sceneFromCamera(const RigSpec& spec, int index) {
+    const double degree = std::numbers::pi / 180.0;
+    const double side = index == 0 ? -1.0 : 1.0;
+    // Turned inward about the camera's y axis (down), then rolled about its optical axis.
+    const Mat3 middleFromCamera =
+        (Eigen::AngleAxisd(-side * 0.5 * spec.convergence_deg * degree, Vec3::UnitY()) *
+         Eigen::AngleAxisd(spec.cameraRoll_deg[static_cast<std::size_t>(index)] * degree,
+                           Vec3::UnitZ()))
+            .toRotationMatrix();
+    const Mat3 sceneFromMiddle =
+        Eigen::AngleAxisd(spec.rigRoll_deg * degree, Vec3::UnitZ()).toRotationMatrix();
+    const Vec3 middle_scene_mm = kSceneCentre_mm - spec.viewingDistance_mm * Vec3::UnitZ();
+    return RigidTransform::fromMatrix(
+        sceneFromMiddle * middleFromCamera,
+        middle_scene_mm + sceneFromMiddle * Vec3(side * 0.5 * spec.baseline_mm, 0.0, 0.0));
+}
+
+} // namespace
+
 StereoRig makeRig(const RigSpec& spec) {
     CameraIntrinsics in;
     in.width_px = spec.width_px;
@@ -239,22 +261,35 @@ StereoRig makeRig(const RigSpec& spec) {
     in.fy_px = spec.focal_px;
     in.cx_px = 0.5 * (spec.width_px - 1);
     in.cy_px = 0.5 * (spec.height_px - 1);
-    in.distortion = {spec.k1, spec.k2, 0.0, 0.0, 0.0};
+    in.distortion = {spec.k1, spec.k2, 0.0, 0.0, spec.k3};
 
     CameraIntrinsics in1 = in;
     // Two real lenses are never identical.
-    in1.fx_px *= 1.004;
-    in1.fy_px *= 1.003;
+    in1.fx_px *= spec.focalRatio1;
+    in1.fy_px *= spec.focalRatio1 - 0.001;
     in1.cx_px += 3.5;
     in1.cy_px -= 2.0;
 
     CameraExtrinsics ex1;
+    if (spec.convergence_deg >= 0.0) {
+        const RigidTransform cam1FromRig =
+            sceneFromCamera(spec, 1).inverse() * sceneFromCamera(spec, 0);
+        ex1.rotation_cam_from_rig = cam1FromRig.rotationMatrix();
+        ex1.translation_cam_from_rig_mm = cam1FromRig.translation_mm;
+        return StereoRig(CameraModel(in, CameraExtrinsics{}), CameraModel(in1, ex1));
+    }
     const double toeIn = std::atan2(spec.baseline_mm, spec.convergenceDistance_mm);
     // Turning about +y by the toe-in points camera 1's axis back toward -x, at camera 0's axis.
     ex1.rotation_cam_from_rig = Eigen::AngleAxisd(toeIn, Vec3::UnitY()).toRotationMatrix();
     const Vec3 centre1(spec.baseline_mm, 0.0, 0.0);
     ex1.translation_cam_from_rig_mm = -(ex1.rotation_cam_from_rig * centre1);
     return StereoRig(CameraModel(in, CameraExtrinsics{}), CameraModel(in1, ex1));
+}
+
+RigidTransform rigFromScene(const RigSpec& spec) {
+    if (spec.convergence_deg < 0.0)
+        return RigidTransform::identity();
+    return sceneFromCamera(spec, 0).inverse();
 }
 
 MotionSpec passingHand(const Vec3& centre_rig_mm, double frequency_hz) {

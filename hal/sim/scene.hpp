@@ -1,6 +1,7 @@
 // Simulated world: marker objects, their motions, occluders, spurious reflections, named scenes.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -37,6 +38,10 @@ struct MarkerObject {
     /// the camera is at least this: 0.2 is a 157 degree cone; retroreflective foil on a curved
     /// object may give only 60 degrees (0.87).
     double minFacingCosine = 0.2;
+    /// Flat markers (retroreflective foil discs of markerDiameter_mm on the surface, each with
+    /// its normal): their images are ellipses narrowed by the slant at which each camera sees
+    /// them. false: spheres, whose images depend only on where they lie.
+    bool flatMarkers = false;
 };
 
 /// The paper's 7x7x7 cm cube with 30 markers, five per face, irregular so no face repeats.
@@ -131,7 +136,34 @@ struct RigSpec {
     double convergenceDistance_mm = 550.0;
     double k1 = -0.08;
     double k2 = 0.02;
+    /// Entrance pupil diameter (mm): with focusDistance_mm it sets the defocus blur, a disc of
+    /// aperture * focal_px * |1 / focus - 1 / depth| px (thin lens) at each depth.
+    double aperture_mm = 1.2;
+    /// Distance the lenses are focused at (mm); 0: the convergence distance.
+    double focusDistance_mm = 0.0;
+    /// Natural vignetting: brightness falls as cos^4 of the angle off the optical axis. false
+    /// turns it off.
+    bool vignetting = true;
+
+    // A rig of any build (randomRig()): used where convergence_deg >= 0, in place of the
+    // project's rig above (camera 0 straight ahead, camera 1 turned toward its axis).
+    /// Angle between the optical axes (degrees): each camera turned inward by half of it.
+    double convergence_deg = -1.0;
+    /// Distance from the middle of the baseline to kSceneCentre_mm (mm), which both cameras
+    /// face, each turned by half the convergence.
+    double viewingDistance_mm = 550.0;
+    /// The whole rig rolled about its viewing direction, and each camera about its own axis
+    /// (degrees): rigs are mounted sideways, and sensors sit a little turned in their lenses.
+    double rigRoll_deg = 0.0;
+    std::array<double, 2> cameraRoll_deg{0.0, 0.0};
+    /// Camera 1's focal length over camera 0's.
+    double focalRatio1 = 1.004;
+    double k3 = 0.0;
 };
+
+/// \brief Where the project's scenes move their objects about, in scene coordinates (mm): the
+/// frame of the project's rig's camera 0.
+inline const Vec3 kSceneCentre_mm{60.0, 0.0, 550.0};
 
 /// \brief A hand passing in front of the objects: it wanders sideways about \a centre_rig_mm
 /// at \a frequency_hz, without turning.
@@ -139,6 +171,12 @@ MotionSpec passingHand(const Vec3& centre_rig_mm, double frequency_hz);
 
 /// \brief Build the stereo rig of \a spec (camera 0 at the origin, camera 1 to its right).
 StereoRig makeRig(const RigSpec& spec);
+
+/**
+ * \brief T_rig_from_scene: where the scene's coordinates (kSceneCentre_mm, the objects' motions)
+ * lie in the frame of \a spec's camera 0. The identity for the project's rig.
+ */
+RigidTransform rigFromScene(const RigSpec& spec);
 
 /// \brief \a rig with camera 1 moved by \a offset_mm and turned by \a turn_deg about a tilted
 /// axis: the cameras after a knock, or a rig measured long ago. The board believes such a rig

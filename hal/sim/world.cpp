@@ -6,6 +6,9 @@
 #include <cstring>
 #include <numbers>
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
 #include "hal/sim/random.hpp"
 
 namespace edgetrack::sim {
@@ -58,6 +61,7 @@ bool segmentHitsSphere(const Vec3& a, const Vec3& b, const Vec3& centre, double 
 World::World(Scene scene, std::uint64_t seed)
     : scene_(std::move(scene))
     , rig_(makeRig(scene_.rig))
+    , T_rig_from_scene_(rigFromScene(scene_.rig))
     , seed_(seed) {
     Random random(mix(seed, 0x5EED));
     const double w = scene_.rig.width_px, h = scene_.rig.height_px;
@@ -83,11 +87,13 @@ World::World(Scene scene, std::uint64_t seed)
             flickerGlints_[static_cast<std::size_t>(camera)].push_back(g);
         }
     }
-    const double midline = 0.5 * scene_.rig.baseline_mm;
+    // Scene coordinates: about the middle of the project's rig, which randomRig()s also face.
+    const double midline =
+        scene_.rig.convergence_deg >= 0.0 ? kSceneCentre_mm.x() : 0.5 * scene_.rig.baseline_mm;
     for (int i = 0; i < scene_.spurious.points3d; ++i)
-        spuriousPoints_rig_mm_.emplace_back(random.uniform(midline - 220.0, midline + 220.0),
-                                            random.uniform(-160.0, 160.0),
-                                            random.uniform(420.0, 760.0));
+        spuriousPoints_rig_mm_.push_back(T_rig_from_scene_.apply(
+            Vec3(random.uniform(midline - 220.0, midline + 220.0), random.uniform(-160.0, 160.0),
+                 random.uniform(420.0, 760.0))));
     occluderScratch_.reserve(scene_.occluders.size());
 }
 
@@ -130,9 +136,55 @@ bool World::markerVisible(const Vec3& position_rig_mm, const Vec3& normal_rig, i
     return true;
 }
 
-void World::fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, int ownObject,
-                     const std::vector<RigidTransform>& poses,
+namespace {
+
+// The image of a sphere of radius_mm centred at centre_cam_mm (camera frame) in normalized
+// coordinates: the cone of rays tangent to it is X^T M X = 0 with M = C C^T - (|C|^2 - R^2) I.
+// On the plane z = 1 (X = (p, 1)) that is the ellipse (p - p0)^T (Q / s) (p - p0) = 1 with
+// Q = -M's upper 2x2 block. Returns false when the sphere reaches behind the camera's plane.
+bool sphereImage(const Vec3& centre_cam_mm, double radius_mm, Vec2& centre,
+                 Eigen::Matrix2d& shape) {
+    const double offAxis2 = centre_cam_mm.squaredNorm() - radius_mm * radius_mm;
+    if (!(centre_cam_mm.z() > radius_mm) || offAxis2 <= 0.0)
+        return false;
+    const Mat3 m = centre_cam_mm * centre_cam_mm.transpose() - offAxis2 * Mat3::Identity();
+    const Eigen::Matrix2d q = -m.topLeftCorner<2, 2>();
+    const Vec2 b = m.topRightCorner<2, 1>();
+    const Eigen::Matrix2d qInverse = q.inverse();
+    centre = qInverse * b;
+    const double scale = m(2, 2) + b.dot(qInverse * b);
+    if (!(scale > 0.0))
+        return false;
+    // shape shape^T = scale Q^-1: the symmetric square root.
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(scale * qInverse);
+    shape = eigen.eigenvectors() * eigen.eigenvalues().cwiseMax(0.0).cwiseSqrt().asDiagonal() *
+            eigen.eigenvectors().transpose();
+    return true;
+}
+
+// The image of a flat disc of radius_mm at centre_cam_mm facing normal_cam, in normalized
+// coordinates, to first order in its size: the projection's Jacobian applied to two radii.
+void discImage(const Vec3& centre_cam_mm, const Vec3& normal_cam, double radius_mm, Vec2& centre,
+               Eigen::Matrix2d& shape) {
+    const double z = centre_cam_mm.z();
+    centre = {centre_cam_mm.x() / z, centre_cam_mm.y() / z};
+    Eigen::Matrix<double, 2, 3> projection;
+    projection << 1.0 / z, 0.0, -centre.x() / z, 0.0, 1.0 / z, -centre.y() / z;
+    const Vec3 axis0 = normal_cam.unitOrthogonal();
+    const Vec3 axis1 = normal_cam.cross(axis0);
+    shape.col(0) = radius_mm * (projection * axis0);
+    shape.col(1) = radius_mm * (projection * axis1);
+}
+
+} // namespace
+
+void World::fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, bool flat,
+                     int ownObject, const std::vector<RigidTransform>& poses,
                      const std::vector<Vec3>& occluderCentres) const {
+    const RigSpec& optics = scene_.rig;
+    const double focus_mm =
+        optics.focusDistance_mm > 0.0 ? optics.focusDistance_mm : optics.convergenceDistance_mm;
+    const bool hasNormal = normal_rig.squaredNorm() > 0.5;
     for (int camera = 0; camera < 2; ++camera) {
         const auto c = static_cast<std::size_t>(camera);
         view.visible[c] = false;
@@ -148,18 +200,39 @@ void World::fillView(MarkerView& view, const Vec3& normal_rig, double diameter_m
                            occluderCentres))
             continue;
         const Vec3 inCamera = model.toCamera(view.position_rig_mm);
+        const double radius_mm = 0.5 * diameter_mm;
+        Vec2 centre;
+        Eigen::Matrix2d shape;
+        if (flat && hasNormal) {
+            discImage(inCamera, model.extrinsics().rotation_cam_from_rig * normal_rig, radius_mm,
+                      centre, shape);
+        } else if (!sphereImage(inCamera, radius_mm, centre, shape)) {
+            continue;
+        }
+        // Small enough for the distortion to be affine across it: its Jacobian at the centre.
+        const Eigen::Matrix2d toPixels =
+            Eigen::Vector2d(in.fx_px, in.fy_px).asDiagonal() * model.distortionJacobian(centre);
         const double distance_mm = inCamera.norm();
         double facing = 1.0;
-        if (normal_rig.squaredNorm() > 0.5) {
+        if (hasNormal) {
             const Vec3 toEye = (model.centre_rig_mm() - view.position_rig_mm).normalized();
             facing = 0.35 + 0.65 * normal_rig.dot(toEye);
         }
         const double falloff = (kReferenceDistance_mm / distance_mm);
+        const double cosOffAxis = inCamera.z() / distance_mm;
+        const double vignetting = optics.vignetting ? std::pow(cosOffAxis, 4) : 1.0;
+        // Thin lens: a point at depth z spreads to a disc of aperture * f * |1/focus - 1/z| px,
+        // whose spread along one axis is a quarter of its diameter.
+        const double defocus_px =
+            optics.aperture_mm * in.fx_px * std::abs(1.0 / focus_mm - 1.0 / inCamera.z());
         view.visible[c] = true;
         view.pixel[c] = *pixel;
-        view.radius_px[c] = in.fx_px * 0.5 * diameter_mm / inCamera.z();
+        view.spotCentre_px[c] = model.pixelFromNormalized(model.distortNormalized(centre));
+        view.shape_px[c] = toPixels * shape;
+        view.radius_px[c] = std::sqrt(std::abs(view.shape_px[c].determinant()));
+        view.blur_px[c] = std::hypot(FrameRenderer::kEdgeBlur_px, 0.25 * defocus_px);
         view.depth_mm[c] = inCamera.z();
-        view.peak_dn[c] = kPeakAtReference_dn * falloff * falloff * facing;
+        view.peak_dn[c] = kPeakAtReference_dn * falloff * falloff * facing * vignetting;
     }
 }
 
@@ -179,10 +252,11 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
     }
     out.objectPoses.clear();
     for (const SceneObject& object : scene_.objects)
-        out.objectPoses.push_back(object.motion.poseAt(t));
+        out.objectPoses.push_back(T_rig_from_scene_ * object.motion.poseAt(t));
     occluderScratch_.clear();
     for (const Occluder& occluder : scene_.occluders)
-        occluderScratch_.push_back(occluder.motion.poseAt(t).translation_mm);
+        occluderScratch_.push_back(
+            T_rig_from_scene_.apply(occluder.motion.poseAt(t).translation_mm));
 
     out.markers.clear();
     for (std::size_t o = 0; o < scene_.objects.size(); ++o) {
@@ -194,8 +268,8 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
             view.marker = static_cast<int>(m);
             view.position_rig_mm = pose.apply(object.markers[m].position_object_mm);
             const Vec3 normal_rig = pose.rotation * object.markers[m].normal_object;
-            fillView(view, normal_rig, object.markerDiameter_mm, static_cast<int>(o),
-                     out.objectPoses, occluderScratch_);
+            fillView(view, normal_rig, object.markerDiameter_mm, object.flatMarkers,
+                     static_cast<int>(o), out.objectPoses, occluderScratch_);
             out.markers.push_back(view);
         }
     }
@@ -209,7 +283,7 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
         view.object = -1;
         view.marker = static_cast<int>(i);
         view.position_rig_mm = spuriousPoints_rig_mm_[i];
-        fillView(view, Vec3::Zero(), kSpuriousPointDiameter_mm, -1, out.objectPoses,
+        fillView(view, Vec3::Zero(), kSpuriousPointDiameter_mm, false, -1, out.objectPoses,
                  occluderScratch_);
         for (double& peak : view.peak_dn)
             peak *= 0.6;
@@ -239,6 +313,11 @@ void World::observe(std::uint64_t frameIndex, Observation& out) const {
     }
 }
 
+Eigen::Matrix2d Glint::shape_px() const {
+    return Eigen::Rotation2Dd(angle_rad).toRotationMatrix() *
+           Eigen::Vector2d(radiusMajor_px, radiusMinor_px).asDiagonal();
+}
+
 // ---------------------------------------------------------------------------------------------
 
 FrameRenderer::FrameRenderer(int width_px, int height_px, double background_dn,
@@ -255,34 +334,37 @@ FrameRenderer::FrameRenderer(int width_px, int height_px, double background_dn,
 }
 
 void FrameRenderer::drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
-                             double radiusMajor_px, double radiusMinor_px, double angle_rad,
-                             double peak_dn, double depth_mm,
-                             std::span<const OccluderView> occluders) const {
-    if (peak_dn <= 0.5)
+                             const Eigen::Matrix2d& shape_px, double blur_px, double peak_dn,
+                             double depth_mm, std::span<const OccluderView> occluders) const {
+    const double determinant = shape_px.determinant();
+    if (peak_dn <= 0.5 || !(std::abs(determinant) > 1e-12))
         return;
-    const double reach = radiusMajor_px + 4.0 * kEdgeBlur_px + 1.0;
+    // u = inverse * offset is the offset in units of the ellipse (|u| = 1 on its edge).
+    const Eigen::Matrix2d inverse = shape_px.inverse();
+    const Eigen::Matrix2d metric = inverse.transpose() * inverse;
+    const Eigen::JacobiSVD<Eigen::Matrix2d> axes(shape_px);
+    const double major_px = axes.singularValues()(0), minor_px = axes.singularValues()(1);
+    const double edgeScale = 1.0 / (std::numbers::sqrt2 * blur_px);
+    // Beyond this distance from the edge the spot adds under 0.45 dn, which the rounding below
+    // turns into nothing (erfc(x) <= exp(-x^2) for x >= 0), so those pixels skip the costly erfc.
+    const double noEffect_px = std::sqrt(std::max(0.0, std::log(peak_dn / 0.9))) / edgeScale;
+    const double reach = major_px + noEffect_px + 1.0;
     const int x0 = std::max(0, static_cast<int>(std::floor(centre_px.x() - reach)));
     const int x1 = std::min(width_px_ - 1, static_cast<int>(std::ceil(centre_px.x() + reach)));
     const int y0 = std::max(0, static_cast<int>(std::floor(centre_px.y() - reach)));
     const int y1 = std::min(height_px_ - 1, static_cast<int>(std::ceil(centre_px.y() + reach)));
-    const double c = std::cos(angle_rad), s = std::sin(angle_rad);
-    const double squeeze = radiusMinor_px / radiusMajor_px;
-    const double edgeScale = 1.0 / (std::numbers::sqrt2 * kEdgeBlur_px);
-    // Beyond this distance the spot adds under 0.45 dn, which the rounding below turns into
-    // nothing (erfc(x) <= exp(-x^2) for x >= 0), so those pixels skip the costly erfc and the
-    // image is the same to the bit. Most of the square around a small disc is such pixels.
-    const double noEffect_px =
-        radiusMinor_px + std::sqrt(std::max(0.0, std::log(peak_dn / 0.9))) / edgeScale;
     for (int y = y0; y <= y1; ++y) {
         std::uint8_t* row = image.data() + static_cast<std::ptrdiff_t>(y) * stride_bytes;
         for (int x = x0; x <= x1; ++x) {
-            const double dx = x - centre_px.x(), dy = y - centre_px.y();
-            const double along = (dx * c + dy * s) * squeeze;
-            const double across = -dx * s + dy * c;
-            const double rho = std::sqrt(along * along + across * across);
-            if (rho > noEffect_px)
+            const Vec2 offset(x - centre_px.x(), y - centre_px.y());
+            const Vec2 pulled = metric * offset;
+            const double q = std::sqrt(offset.dot(pulled));
+            // Signed distance to the edge (px), to first order: (q - 1) / |grad q|.
+            const double gradient = q > 1e-9 ? pulled.norm() / q : 0.0;
+            const double edge_px = gradient > 0.0 ? (q - 1.0) / gradient : -minor_px;
+            if (edge_px > noEffect_px)
                 continue;
-            double value = peak_dn * 0.5 * std::erfc((rho - radiusMinor_px) * edgeScale);
+            double value = peak_dn * 0.5 * std::erfc(edge_px * edgeScale);
             // Behind the edge of a nearer occluder, as blurred as any edge.
             for (const OccluderView& o : occluders)
                 if (o.depth_mm < depth_mm)
@@ -309,15 +391,14 @@ void FrameRenderer::render(std::span<std::uint8_t> image, int stride_bytes, int 
     const double lit = std::clamp(ledLitFraction, 0.0, 1.0);
     for (const MarkerView& m : observation.markers)
         if (m.visible[c])
-            drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,
+            drawSpot(image, stride_bytes, m.spotCentre_px[c], m.shape_px[c], m.blur_px[c],
                      m.peak_dn[c] * lit, m.depth_mm[c], observation.occluders[c]);
     for (const MarkerView& m : observation.spuriousPoints)
         if (m.visible[c])
-            drawSpot(image, stride_bytes, m.pixel[c], m.radius_px[c], m.radius_px[c], 0.0,
+            drawSpot(image, stride_bytes, m.spotCentre_px[c], m.shape_px[c], m.blur_px[c],
                      m.peak_dn[c]);
     for (const Glint& g : observation.glints[c])
-        drawSpot(image, stride_bytes, g.centre_px, g.radiusMajor_px, g.radiusMinor_px, g.angle_rad,
-                 g.peak_dn);
+        drawSpot(image, stride_bytes, g.centre_px, g.shape_px(), kEdgeBlur_px, g.peak_dn);
 }
 
 } // namespace edgetrack::sim

@@ -18,8 +18,31 @@ struct MarkerView {
     Vec3 position_rig_mm = Vec3::Zero();
     /// In the image, facing the camera and not hidden by any body or hand.
     std::array<bool, 2> visible{};
+    /// The projection of the marker's centre (raw px): where a perfect detector puts it.
     std::array<Vec2, 2> pixel{Vec2::Zero(), Vec2::Zero()};
+    /// Radius of the disc of the same area as the marker's image (px).
     std::array<double, 2> radius_px{};
+    /// The marker's image as the lens forms it, an ellipse: the pixels spotCentre_px + shape_px u
+    /// for u in the unit disc (raw px). For a sphere it is the tangent cone's conic, which is
+    /// longer along the radius from the image centre by 1 / cos of the angle off the axis; for a
+    /// flat marker it is the disc seen at its slant; both are then warped by the lens distortion.
+    std::array<Eigen::Matrix2d, 2> shape_px{Eigen::Matrix2d::Identity(),
+                                            Eigen::Matrix2d::Identity()};
+    /// Centre of that ellipse (raw px): for a sphere off the axis it lies outward of pixel by a
+    /// few thousandths of a pixel (the cone's conic is not centred on the centre's image).
+    std::array<Vec2, 2> spotCentre_px{Vec2::Zero(), Vec2::Zero()};
+    /// Blur of the image's edge (Gaussian sigma, px): the lens's own (FrameRenderer::kEdgeBlur_px)
+    /// and the defocus at the marker's depth.
+    std::array<double, 2> blur_px{0.6, 0.6};
+
+    /// \brief Make camera \a camera's image a disc of \a radius_px at \a centre_px (for tests
+    /// that place images by hand).
+    void setDisc(int camera, const Vec2& centre_px, double discRadius_px) {
+        const auto c = static_cast<std::size_t>(camera);
+        pixel[c] = spotCentre_px[c] = centre_px;
+        radius_px[c] = discRadius_px;
+        shape_px[c] = discRadius_px * Eigen::Matrix2d::Identity();
+    }
     /// Peak brightness with the LED ring lit for the whole exposure (DN; above 255 saturates).
     std::array<double, 2> peak_dn{};
     /// Depth in each camera's frame (mm, along its optical axis): what lies nearer hides it.
@@ -44,6 +67,8 @@ struct Glint {
     double peak_dn = 400.0;
 
     bool isRound() const { return radiusMajor_px <= 1.3 * radiusMinor_px; }
+    /// Its ellipse as MarkerView::shape_px (px).
+    Eigen::Matrix2d shape_px() const;
 };
 
 /// \brief The world at one instant, from the cameras' point of view.
@@ -90,12 +115,14 @@ public:
                        const std::vector<Vec3>& occluderCentres) const;
 
 private:
-    void fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, int ownObject,
-                  const std::vector<RigidTransform>& poses,
+    void fillView(MarkerView& view, const Vec3& normal_rig, double diameter_mm, bool flat,
+                  int ownObject, const std::vector<RigidTransform>& poses,
                   const std::vector<Vec3>& occluderCentres) const;
 
     Scene scene_;
     StereoRig rig_;
+    /// Where the scene's motions and points lie in the rig frame (rigFromScene()).
+    RigidTransform T_rig_from_scene_;
     std::uint64_t seed_;
     std::array<std::vector<Glint>, 2> staticGlints_;
     std::array<std::vector<Glint>, 2> flickerGlints_;
@@ -124,13 +151,14 @@ public:
                 const Observation& observation, double ledLitFraction,
                 std::uint64_t frameIndex) const;
 
-    /// \brief Blur of every disc edge (px, Gaussian sigma).
+    /// \brief Blur of every edge in focus (px, Gaussian sigma): the lens and the pixels.
     static constexpr double kEdgeBlur_px = 0.6;
 
 private:
-    /// A spot at depth \a depth_mm, cut by the edges of the \a occluders nearer than that.
+    /// An elliptic spot (centre_px + shape_px u, u in the unit disc) with an edge blurred by
+    /// \a blur_px at depth \a depth_mm, cut by the edges of the \a occluders nearer than that.
     void drawSpot(std::span<std::uint8_t> image, int stride_bytes, const Vec2& centre_px,
-                  double radiusMajor_px, double radiusMinor_px, double angle_rad, double peak_dn,
+                  const Eigen::Matrix2d& shape_px, double blur_px, double peak_dn,
                   double depth_mm = 0.0, std::span<const OccluderView> occluders = {}) const;
 
     int width_px_;

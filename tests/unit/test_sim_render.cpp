@@ -1,4 +1,5 @@
 // Tests of the simulated cameras' images: blob centres, LED dependence, merging, determinism.
+#include <Eigen/SVD>
 #include <gtest/gtest.h>
 
 #include "core/pixel_stats.hpp"
@@ -88,15 +89,40 @@ TEST(SimRender, IsolatedBlobCentresMatchProjectedTruth) {
     EXPECT_LT(worst, 0.3);
 }
 
-TEST(SimRender, BlobSizeFollowsDistance) {
-    const World world(*makeScene("slow_cube", 1), 1);
-    Observation obs;
-    world.observe(0, obs);
-    for (const MarkerView& m : obs.markers) {
-        if (!m.visible[0])
-            continue;
-        const double z = world.rig().camera(0).toCamera(m.position_rig_mm).z();
-        EXPECT_NEAR(m.radius_px[0], 910.0 * 3.0 / z, 1e-9);
+TEST(SimRender, ASpheresImageIsTheConicOfItsTangentCone) {
+    // A 6 mm sphere's image is an ellipse: across the radius from the image centre its
+    // semi-axis is f R / z (z the depth), along it 1 / cos(theta) longer (theta off the axis);
+    // then the distortion warps it. Its area-equivalent radius is then R / range times the
+    // camera model's pixelsPerRadian(), whatever the distortion or where it lies.
+    Scene scene = *makeScene("slow_cube", 1);
+    for (const bool distorted : {false, true}) {
+        if (!distorted)
+            scene.rig.k1 = scene.rig.k2 = 0.0;
+        const World world(scene, 1);
+        const CameraModel& camera = world.rig().camera(0);
+        Observation obs;
+        std::size_t seen = 0;
+        for (std::uint64_t frame = 0; frame < 400; frame += 20) {
+            world.observe(frame, obs);
+            for (const MarkerView& m : obs.markers) {
+                if (!m.visible[0])
+                    continue;
+                ++seen;
+                const Vec3 p = camera.toCamera(m.position_rig_mm);
+                const Vec3 toMarker = m.position_rig_mm - camera.centre_rig_mm();
+                EXPECT_NEAR(m.radius_px[0],
+                            3.0 * camera.pixelsPerRadian(toMarker) / toMarker.norm(),
+                            2e-3 * m.radius_px[0]);
+                if (distorted)
+                    continue;
+                const Eigen::JacobiSVD<Eigen::Matrix2d> axes(m.shape_px[0]);
+                const double cosTheta = p.z() / p.norm();
+                EXPECT_NEAR(axes.singularValues()(1), 910.0 * 3.0 / p.z(), 2e-3 * m.radius_px[0]);
+                EXPECT_NEAR(axes.singularValues()(0) * cosTheta, 910.0 * 3.0 / p.z(),
+                            2e-3 * m.radius_px[0]);
+            }
+        }
+        EXPECT_GT(seen, 100u);
     }
 }
 
@@ -163,16 +189,19 @@ TEST(SimLevels, OverlappingMarkersMergeIntoOneBlob) {
     Observation obs;
     MarkerView a, b, far;
     a.visible = {true, true};
-    a.pixel = {Vec2(100, 100), Vec2(90, 100)};
-    a.radius_px = {4, 4};
+    a.setDisc(0, Vec2(100, 100), 4.0);
+    a.setDisc(1, Vec2(90, 100), 4.0);
     a.peak_dn = {1000, 1000};
     b = a;
-    b.pixel = {Vec2(105, 100), Vec2(140, 100)}; // touches a in camera 0 only
+    b.setDisc(0, Vec2(105, 100), 4.0); // touches a in camera 0 only
+    b.setDisc(1, Vec2(140, 100), 4.0);
     MarkerView faint = a;
-    faint.pixel = {Vec2(600, 500), Vec2(600, 500)};
+    faint.setDisc(0, Vec2(600, 500), 4.0);
+    faint.setDisc(1, Vec2(600, 500), 4.0);
     faint.peak_dn = {50, 50}; // below the detection level: no blob
     far = a;
-    far.pixel = {Vec2(400, 300), Vec2(380, 300)};
+    far.setDisc(0, Vec2(400, 300), 4.0);
+    far.setDisc(1, Vec2(380, 300), 4.0);
     obs.markers = {a, b, far, faint};
     LevelNoise exact;
     exact.blobCentreSigma_px = 0.0;
@@ -214,8 +243,7 @@ TEST(SimRender, AMarkerAtTheEdgeOfANearerHandIsCutByIt) {
     Observation observation;
     MarkerView marker;
     marker.visible = {true, true};
-    marker.pixel[0] = {100.0, 100.0};
-    marker.radius_px[0] = 8.0;
+    marker.setDisc(0, {100.0, 100.0}, 8.0);
     marker.peak_dn[0] = 1000.0;
     marker.depth_mm[0] = 500.0;
     observation.markers.push_back(marker);
