@@ -56,6 +56,57 @@ struct Circle {
     bool valid = false;
 };
 
+// The RMS distance (px) of \a points from the ellipse fitted to them, and its elongation; an
+// infinite RMS when no ellipse fits (a hyperbola or parabola, too few points). The conic
+// a x^2 + b xy + c y^2 + d x + e y + f = 0 with a + c = 1 is fitted by linear least squares about
+// the points' mean; each point's distance is its Sampson distance |F| / |grad F|.
+struct EllipseFit {
+    double rms = std::numeric_limits<double>::infinity();
+    double elongation = 0.0;
+};
+
+EllipseFit fitEllipse(const Vec2* points, std::size_t count) {
+    EllipseFit fit;
+    if (count < 8)
+        return fit;
+    Vec2 mean = Vec2::Zero();
+    for (std::size_t i = 0; i < count; ++i)
+        mean += points[i];
+    mean /= static_cast<double>(count);
+    // Unknowns (a, b, d, e, f) with c = 1 - a: a (x^2 - y^2) + b xy + d x + e y + f = -y^2.
+    Eigen::Matrix<double, 5, 5> normal = Eigen::Matrix<double, 5, 5>::Zero();
+    Eigen::Matrix<double, 5, 1> rhs = Eigen::Matrix<double, 5, 1>::Zero();
+    for (std::size_t i = 0; i < count; ++i) {
+        const Vec2 p = points[i] - mean;
+        Eigen::Matrix<double, 5, 1> row;
+        row << p.x() * p.x() - p.y() * p.y(), p.x() * p.y(), p.x(), p.y(), 1.0;
+        normal += row * row.transpose();
+        rhs -= row * (p.y() * p.y());
+    }
+    const Eigen::Matrix<double, 5, 1> q = normal.ldlt().solve(rhs);
+    const double a = q(0), b = q(1), c = 1.0 - q(0), d = q(2), e = q(3), f = q(4);
+    if (!q.allFinite() || !(4.0 * a * c - b * b > 0.0))
+        return fit;
+    double sum = 0.0;
+    for (std::size_t i = 0; i < count; ++i) {
+        const Vec2 p = points[i] - mean;
+        const double value =
+            a * p.x() * p.x() + b * p.x() * p.y() + c * p.y() * p.y() + d * p.x() + e * p.y() + f;
+        const Vec2 gradient(2.0 * a * p.x() + b * p.y() + d, b * p.x() + 2.0 * c * p.y() + e);
+        const double length2 = gradient.squaredNorm();
+        if (!(length2 > 1e-18))
+            return fit;
+        sum += value * value / length2;
+    }
+    // The semi-axes go as 1 / sqrt of the eigenvalues of [[a, b/2], [b/2, c]].
+    const double mid = 0.5 * (a + c), half = std::sqrt(0.25 * (a - c) * (a - c) + 0.25 * b * b);
+    if (!(mid - half > 0.0))
+        return fit;
+    fit.rms = std::sqrt(sum / static_cast<double>(count));
+    fit.elongation = std::sqrt((mid + half) / (mid - half));
+    return fit;
+}
+
 Circle fitCircle(const Vec2* points, const std::uint8_t* use, std::size_t count) {
     Circle c;
     Eigen::Matrix3d normal = Eigen::Matrix3d::Zero();
@@ -452,7 +503,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
         const Moments& m = moments_[label];
         if (!worthSplitting(m))
             continue;
-        if (!splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride)) {
+        if (!splitOrEllipse(m, pixels, stride_bytes, label * kOrderStride, 1)) {
             ++counters_.splitRefused;
             refused_.push_back(roundBlob(m));
         }
@@ -461,7 +512,7 @@ void BlobDetector::emitBlobs(const std::uint8_t* pixels, int stride_bytes,
     // Such a blob stays one blob unless two discs fit it.
     for (const std::uint32_t label : maybeMerged_) {
         const Moments& m = moments_[label];
-        if (!worthSplitting(m) || !splitIntoDiscs(m, pixels, stride_bytes, label * kOrderStride, 2))
+        if (!worthSplitting(m) || !splitOrEllipse(m, pixels, stride_bytes, label * kOrderStride, 2))
             addCandidate(roundBlob(m), label * kOrderStride);
     }
 
@@ -585,6 +636,33 @@ std::size_t BlobDetector::traceOutline(int left, int top, int right, int bottom,
         }
     tracedEdges_ = edges;
     return edges;
+}
+
+bool BlobDetector::splitOrEllipse(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
+                                  std::uint32_t order, std::size_t minParts) {
+    const std::size_t edges =
+        traceOutline(m.left, m.top, m.right, m.bottom, m.seedX, m.seedY, pixels, stride_bytes);
+    const EllipseFit ellipse = fitEllipse(splitEdge_.get(), edges);
+    const bool oneMarker =
+        ellipse.rms <= kSplitFitRms_px && ellipse.elongation <= config_.maxMarkerElongation;
+    const std::size_t before = candidates_.size();
+    const BlobCounters countersBefore = counters_;
+    if (splitIntoDiscs(m, pixels, stride_bytes, order, minParts)) {
+        double splitRms = 0.0;
+        for (std::size_t k = before; k < candidates_.size(); ++k)
+            splitRms = std::max(splitRms, static_cast<double>(candidates_[k].blob.fitRms_px));
+        if (!oneMarker || splitRms < ellipse.rms)
+            return true;
+        // The ellipse explains the outline better: the split is undone.
+        while (candidates_.size() > before)
+            candidates_.pop_back();
+        counters_ = countersBefore;
+    } else if (!oneMarker) {
+        return false;
+    }
+    ++counters_.ellipses;
+    addCandidate(roundBlob(m), order);
+    return true;
 }
 
 bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,

@@ -26,6 +26,13 @@ struct BlobDetectorConfig {
     double maxElongation = 1.35;
     /// Smallest share of the moment ellipse that the blob fills; merged markers leave gaps.
     double minFill = 0.75;
+    /// One marker's image is an ellipse, not always a disc: a sphere theta off the optical axis
+    /// images 1 / cos(theta) longer along the radius (1.15 at 30 degrees, 2 at 60), a flat
+    /// marker 1 / cos of the slant it is seen at, and the lens distortion stretches either way.
+    /// A blob that fails the tests above or below but whose whole outline one ellipse fits
+    /// (as well as a split part's circle must fit its own) is one marker up to this
+    /// elongation; beyond it, a streak (a lit edge, a cable) is no marker.
+    double maxMarkerElongation = 2.0;
     /// A blob that fails those two tests is split into the discs it is made of (up to five),
     /// each centred by a circle fitted to its own part of the outline (see BlobDetector).
     bool splitMerged = true;
@@ -116,6 +123,8 @@ struct BlobCounters {
     std::uint64_t splitParts = 0;   ///< discs those gave
     std::uint64_t splitRefused = 0; ///< blobs not round that could not be split with confidence
     std::uint64_t cutDiscs = 0;     ///< discs cut by an edge, centred by their visible arc
+    /// Blobs not round or perhaps merged whose outline one ellipse fits: one marker each.
+    std::uint64_t ellipses = 0;
     /// Blobs split again, with at least one disc placed, on the epipolar lines of the other
     /// camera's blobs (splitOnLines() without free discs).
     std::uint64_t splitOnLines = 0;
@@ -195,6 +204,15 @@ private:
     void finishRow();
     void emitBlobs(const std::uint8_t* pixels, int stride_bytes, BoundedVectorView<Blob>& out,
                    std::span<const Vec2> expected_px);
+    /// Split the blob of \a m (not round, or perhaps merged) into its discs, or take it whole as
+    /// one marker whose image is an ellipse: of the two, the one whose outline fits better. One
+    /// ellipse (5 parameters) explains one marker's outline to the outline's own noise, and
+    /// two discs far over each other only to their notches; two circles (6) explain the latter.
+    /// So the blob stays whole when one ellipse of at most maxMarkerElongation fits its outline
+    /// within kSplitFitRms_px and no worse than the split's circles fit their own arcs.
+    /// \return false when it is neither (refused).
+    bool splitOrEllipse(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
+                        std::uint32_t order, std::size_t minParts);
     /// Split a blob that is not round into the discs it is made of (up to kMaxSplitParts), as
     /// candidates (those that can be centred with confidence), or centre it as one disc cut by an
     /// edge; false when neither, or when fewer than \a minParts discs can be centred.

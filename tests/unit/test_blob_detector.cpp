@@ -259,6 +259,37 @@ TEST(BlobDetector, SplitsTouchingDiscsIntoTheirCentres) {
     EXPECT_EQ(c.splitRefused, 1u) << "the streak";
 }
 
+TEST(BlobDetector, KeepsOneMarkerSeenFarOffTheAxisOrAtASlantWhole) {
+    // One marker's image is an ellipse: a sphere far off the axis of a wide lens, a flat marker
+    // at a slant. Elongations 1.1 to 1.9 at any angle are one blob each, at its centre; a streak
+    // (a lit edge) longer than a marker can look stays refused.
+    Image image(640, 480);
+    std::vector<sim::Glint> ellipses;
+    for (int k = 0; k < 8; ++k) {
+        sim::Glint g = disc(60.0 + 75.0 * k + 0.3 * k, 120.0 + 0.17 * k, 5.0);
+        g.radiusMajor_px = 5.0 * (1.1 + 0.115 * k);
+        g.angle_rad = 0.4 * k;
+        ellipses.push_back(g);
+    }
+    std::vector<sim::Glint> spots = ellipses;
+    sim::Glint streak = disc(320.0, 360.0, 1.5);
+    streak.radiusMajor_px = 14.0;
+    streak.angle_rad = 0.7;
+    spots.push_back(streak);
+    drawSpots(image, spots);
+    BlobDetector detector(BlobDetectorConfig{}, image.width, image.height);
+    FixedVector<Blob, 16> blobs;
+    detector.detect(image.pixels.data(), image.stride, blobs);
+    ASSERT_EQ(blobs.size(), ellipses.size());
+    for (const sim::Glint& g : ellipses) {
+        const Blob* nearest = nearestBlob(blobs, g.centre_px);
+        ASSERT_NE(nearest, nullptr);
+        EXPECT_LT((nearest->centre_px - g.centre_px).norm(), 0.1) << g.radiusMajor_px;
+        EXPECT_FALSE(nearest->split) << g.radiusMajor_px;
+    }
+    EXPECT_EQ(detector.counters().splitBlobs, 0u);
+}
+
 TEST(BlobDetector, SplitsDiscsFarOverEachOtherThatPassAsRound) {
     // Two discs 0.3 to 0.4 diameters apart make a blob round enough to pass the roundness
     // tests (elongation under 1.35, fill over 0.75): its outline is still two arcs, and two
