@@ -106,8 +106,8 @@ void MarkerPipeline::rememberForContinuity() {
             if (last.missing == 0)
                 next.expected_rig_mm = point + (point - last.position_rig_mm);
             next.carried = markers_[m].carried ? last.carried + 1 : 0;
-            if (next.size_pxmm == 0.0)
-                next.size_pxmm = last.size_pxmm;
+            if (next.size_mm == 0.0)
+                next.size_mm = last.size_mm;
         }
         current_.push_back(next);
     }
@@ -344,12 +344,12 @@ bool MarkerPipeline::mergedBlobAt(int camera, const Vec2& pixel_px, int& blob, B
 }
 
 bool MarkerPipeline::nearerMarkerCovers(int camera, const Vec2& pixel_px, const Vec3& point_rig_mm,
-                                        double size_pxmm, int& blob) const {
+                                        double size_mm, int& blob) const {
     const BoundedVector<Blob>& blobs = blobs_[index(camera)];
     const Vec3 centre_rig_mm = stereo_.rig().camera(camera).centre_rig_mm();
     const double range_mm = (point_rig_mm - centre_rig_mm).norm();
-    // Of unknown size (size_pxmm 0), the point's centre at least must lie so within the disc.
-    const double radius_px = radiusAt(size_pxmm, point_rig_mm, camera);
+    // Of unknown size (size_mm 0), the point's centre at least must lie so within the disc.
+    const double radius_px = radiusAt(size_mm, point_rig_mm, camera);
     for (std::size_t b = 0; b < blobs.size(); ++b) {
         const int marker = markerOfBlob_[index(camera)][b];
         if (marker < 0 || blobs[b].split ||
@@ -456,7 +456,7 @@ void MarkerPipeline::carryHiddenMarkers(const std::array<ImageView, 2>& images) 
         int cover = -1;
         if (!hidden_px || (!mergedBlobAt(1 - bestCamera, *hidden_px, cover) &&
                            !nearerMarkerCovers(1 - bestCamera, *hidden_px, bestPoint_rig_mm,
-                                               last.size_pxmm, cover)))
+                                               last.size_mm, cover)))
             continue;
         if (const ImageView& image = images[index(1 - bestCamera)]; image.pixels != nullptr) {
             const long x = std::lround(hidden_px->x()), y = std::lround(hidden_px->y());
@@ -540,8 +540,13 @@ MarkerPipeline::epipolarLineNear(int camera, int blob, const Ray& otherRay) cons
         otherCamera.project(ray.origin_rig_mm + 1.02 * near->range0_mm * ray.direction_rig);
     if (!from || !to || !((*to - *from).norm() > 1e-6))
         return std::nullopt;
+    // A sphere's image radius is R / range times the camera's pixelsPerRadian() where it lies.
+    const double ownScale = stereo_.rig().camera(camera).pixelsPerRadian(ray.direction_rig);
+    const double otherScale = otherCamera.pixelsPerRadian(otherRay.direction_rig);
+    if (!(ownScale > 0.0) || !(otherScale > 0.0))
+        return std::nullopt;
     return LineNear{PixelLine{*from, (*to - *from).normalized()},
-                    near->range0_mm / near->range1_mm};
+                    near->range0_mm / near->range1_mm * otherScale / ownScale};
 }
 
 void MarkerPipeline::splitWithUnpaired(const ImageView& image, int camera, int shared) {

@@ -176,12 +176,13 @@ private:
     /// (the middle of several discs) goes. Trackers follow blobs through merges the same way: the
     /// guess seeds the fit, the outline measures the place.
     void splitWhereMarkersAreExpected(const std::array<ImageView, 2>& images);
-    /// Radius (px) times range (mm) of marker \a m's blobs, the mean of both cameras'; 0 when
-    /// unknown (a carried marker's other blob covers several discs).
+    /// The radius (mm) of the sphere that marker \a m's blobs are images of (blob radius times
+    /// range over CameraModel::pixelsPerRadian()), the mean of both cameras'; 0 when unknown (a
+    /// carried marker's other blob covers several discs).
     double markerSize(std::size_t m) const;
-    /// The image radius (px) in \a camera of a marker of \a size_pxmm (as markerSize()) at
-    /// \a point_rig_mm.
-    double radiusAt(double size_pxmm, const Vec3& point_rig_mm, int camera) const;
+    /// The image radius (px) in \a camera of a sphere of radius \a size_mm (as markerSize())
+    /// at \a point_rig_mm.
+    double radiusAt(double size_mm, const Vec3& point_rig_mm, int camera) const;
     /// The step (mm) from the last frame to this one of the points near last_[\a hidden] that a
     /// marker continues (within kNeighbourhood_mm, the nearer weighing more); zero when none.
     /// Not its own last step carried on: a marker about to hide moves its disc into another's,
@@ -195,10 +196,10 @@ private:
     bool mergedBlobAt(int camera, const Vec2& pixel_px, int& blob, Blob* cover = nullptr) const;
     /// Whether a blob of \a camera that is one marker's, a marker nearer that camera than
     /// \a point_rig_mm, covers the disc of that point (projected at \a pixel_px, of
-    /// \a size_pxmm as LastPoint::size_pxmm) but for kHiddenDiscMargin_px: the point may be
+    /// \a size_mm as LastPoint::size_mm) but for kHiddenDiscMargin_px: the point may be
     /// hidden behind it, their centres too near to show two discs. That blob into \a blob.
     bool nearerMarkerCovers(int camera, const Vec2& pixel_px, const Vec3& point_rig_mm,
-                            double size_pxmm, int& blob) const;
+                            double size_mm, int& blob) const;
     /// Triangulate \a blob of \a camera (its index \a at) with \a otherBlob of the other camera
     /// (\a otherAt), whichever camera is camera 0.
     bool pairBlobs(int camera, const Blob& blob, int at, const Blob& otherBlob, int otherAt,
@@ -296,8 +297,8 @@ private:
         std::uint32_t carried = 0;
         /// Frames it has been missing (0: a point of the last frame).
         std::uint32_t missing = 0;
-        /// Its blobs' radius (px) times range (mm), as markerSize(); 0 when unknown.
-        double size_pxmm = 0.0;
+        /// Its radius as its blobs tell it (mm), as markerSize(); 0 when unknown.
+        double size_mm = 0.0;
     };
     /// The last frame's points in order of expected x, and this frame's while it is remembered
     /// (the two swap their storage).

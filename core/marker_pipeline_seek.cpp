@@ -14,15 +14,21 @@ double MarkerPipeline::markerSize(std::size_t m) const {
     double sum = 0.0;
     for (int camera = 0; camera < 2; ++camera) {
         const int blob = camera == 0 ? marker.blob0 : marker.blob1;
-        const double range_mm =
-            (marker.position_rig_mm - stereo_.rig().camera(camera).centre_rig_mm()).norm();
-        sum += blobs_[index(camera)][static_cast<std::size_t>(blob)].discRadius_px() * range_mm;
+        const CameraModel& model = stereo_.rig().camera(camera);
+        const Vec3 toPoint = marker.position_rig_mm - model.centre_rig_mm();
+        const double pixelsPerRadian = model.pixelsPerRadian(toPoint);
+        if (!(pixelsPerRadian > 0.0))
+            return 0.0;
+        sum += blobs_[index(camera)][static_cast<std::size_t>(blob)].discRadius_px() *
+               toPoint.norm() / pixelsPerRadian;
     }
     return 0.5 * sum;
 }
 
-double MarkerPipeline::radiusAt(double size_pxmm, const Vec3& point_rig_mm, int camera) const {
-    return size_pxmm / (point_rig_mm - stereo_.rig().camera(camera).centre_rig_mm()).norm();
+double MarkerPipeline::radiusAt(double size_mm, const Vec3& point_rig_mm, int camera) const {
+    const CameraModel& model = stereo_.rig().camera(camera);
+    const Vec3 toPoint = point_rig_mm - model.centre_rig_mm();
+    return size_mm * model.pixelsPerRadian(toPoint) / toPoint.norm();
 }
 
 void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>& images) {
@@ -42,7 +48,7 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
     // Point last_[i], where it is expected in both images.
     const auto seek = [&](std::size_t i) {
         const LastPoint& last = last_[i];
-        if (last.age == 0 || !(last.size_pxmm > 0.0))
+        if (last.age == 0 || !(last.size_mm > 0.0))
             return;
         for (const Sought& s : sought)
             if (s.last == i)
@@ -63,7 +69,7 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
             if (!pixel)
                 return;
             s.pixel_px[index(camera)] = *pixel;
-            s.radius_px[index(camera)] = radiusAt(last.size_pxmm, s.expected_rig_mm, camera);
+            s.radius_px[index(camera)] = radiusAt(last.size_mm, s.expected_rig_mm, camera);
         }
         sought.push_back(s);
     };
@@ -91,10 +97,10 @@ void MarkerPipeline::splitWhereMarkersAreExpected(const std::array<ImageView, 2>
     // in its blob is found.
     const auto largerThanItsMarker = [&](std::size_t c, std::size_t b, int m, const Sought& s) {
         const int l = continuesLast_[static_cast<std::size_t>(m)];
-        if (l < 0 || !(last_[static_cast<std::size_t>(l)].size_pxmm > 0.0))
+        if (l < 0 || !(last_[static_cast<std::size_t>(l)].size_mm > 0.0))
             return blobs_[c][b].discRadius_px() > kOwnBlobSize * s.radius_px[c]; // a new marker
         return blobs_[c][b].discRadius_px() >
-               kOwnBlobSize * radiusAt(last_[static_cast<std::size_t>(l)].size_pxmm,
+               kOwnBlobSize * radiusAt(last_[static_cast<std::size_t>(l)].size_mm,
                                        markers_[static_cast<std::size_t>(m)].position_rig_mm,
                                        static_cast<int>(c));
     };

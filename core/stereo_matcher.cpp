@@ -75,8 +75,7 @@ struct StereoMatcher::Prepared {
             rectified[c] = std::make_unique<Vec2[]>(maxBlobs);
             pixel[c] = std::make_unique<Vec2[]>(maxBlobs);
             radius[c] = std::make_unique<double[]>(maxBlobs);
-            taken[c] = std::make_unique<bool[]>(maxBlobs);
-            refusedWith[c] = std::make_unique<int[]>(maxBlobs);
+            angularRadius[c] = std::make_unique<double[]>(maxBlobs);
             rays[c] = std::make_unique<Ray[]>(maxBlobs);
             valid[c] = std::make_unique<bool[]>(maxBlobs);
             neighbours[c] = std::make_unique<Neighbourhood[]>(maxBlobs);
@@ -94,10 +93,9 @@ struct StereoMatcher::Prepared {
     std::unique_ptr<Vec2[]> pixel[2];
     /// Radius of a disc of the blob's area (px).
     std::unique_ptr<double[]> radius[2];
-    /// Part of a marker already: left out of a second round of correspondence.
-    std::unique_ptr<bool[]> taken[2];
-    /// The other camera's blob it was paired with and refused for their sizes, or -1.
-    std::unique_ptr<int[]> refusedWith[2];
+    /// Angular radius (rad) of the sphere whose image that is: radius over pixelsPerRadian();
+    /// 0 for a blob without an area.
+    std::unique_ptr<double[]> angularRadius[2];
     std::unique_ptr<Ray[]> rays[2];
     std::unique_ptr<bool[]> valid[2];
     /// Offsets of the other blobs of the same camera inside region R (rectified px).
@@ -177,8 +175,7 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
         for (std::size_t i = 0; i < p.count[c]; ++i) {
             p.pixel[c][i] = blobs[c][i].centre_px;
             p.radius[c][i] = blobs[c][i].discRadius_px();
-            p.taken[c][i] = false;
-            p.refusedWith[c][i] = -1;
+            p.angularRadius[c][i] = 0.0;
             p.valid[c][i] = false;
             const std::optional<Ray> ray = rig_.camera(c).ray(blobs[c][i].centre_px);
             if (!ray) {
@@ -193,6 +190,9 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
             p.rays[c][i] = *ray;
             p.rectified[c][i] = *rectified;
             p.valid[c][i] = true;
+            const double pixelsPerRadian = rig_.camera(c).pixelsPerRadian(ray->direction_rig);
+            if (p.radius[c][i] > 0.0 && pixelsPerRadian > 0.0)
+                p.angularRadius[c][i] = p.radius[c][i] / pixelsPerRadian;
         }
         std::size_t valid = 0;
         for (std::size_t i = 0; i < p.count[c]; ++i)
@@ -329,13 +329,34 @@ double StereoMatcher::neighbourhoodDistance(int i, int j) const {
     return meanClosestDistance(smaller, larger);
 }
 
+double StereoMatcher::sizeWeight(int i, int j) const {
+    const Prepared& p = *prepared_;
+    const double angular0 = p.angularRadius[0][idx(i)], angular1 = p.angularRadius[1][idx(j)];
+    if (config_.sizeSigma <= 0.0 || angular0 <= 0.0 || angular1 <= 0.0)
+        return 1.0;
+    // The point's ranges from both centres, from its rectified coordinates: depth f B / d along
+    // the rectified axis, and each camera's rectified ray length per unit depth.
+    const Vec2& a = p.rectified[0][idx(i)];
+    const Vec2& b = p.rectified[1][idx(j)];
+    const double f = rig_.rectifiedFocal_px();
+    const double rangeRatio = std::sqrt((a.x() * a.x() + a.y() * a.y() + f * f) /
+                                        (b.x() * b.x() + b.y() * b.y() + f * f));
+    const double logRatio = std::log(angular0 / angular1 * rangeRatio);
+    const double rim0 = config_.sizeRimSigma_px / p.radius[0][idx(i)];
+    const double rim1 = config_.sizeRimSigma_px / p.radius[1][idx(j)];
+    const double variance = config_.sizeSigma * config_.sizeSigma + rim0 * rim0 + rim1 * rim1;
+    return std::exp(-logRatio * logRatio / (2.0 * variance));
+}
+
 double StereoMatcher::proximity(int i, int j) const {
     if (!inBand(i, j))
         return 0.0;
-    // Eq. 4: g_epi (eq. 1) times the neighbourhood term, as one exponential.
+    // Eq. 4: g_epi (eq. 1) times the neighbourhood term, as one exponential, times the weight of
+    // the two blobs' sizes.
     const double dy = prepared_->rectified[0][idx(i)].y() - prepared_->rectified[1][idx(j)].y();
     const double d = neighbourhoodDistance(i, j);
-    return std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px) -
+    return sizeWeight(i, j) *
+           std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px) -
                     d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px));
 }
 
@@ -350,8 +371,7 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
         for (int t = p.lowerBound(1, y - band_px_);
              t < static_cast<int>(p.validCount[1]) && p.rowOf(1, t) <= y + band_px_; ++t) {
             const int j = p.byRow[1][idx(t)];
-            if (!p.taken[0][idx(i)] && !p.taken[1][idx(j)] && p.refusedWith[0][idx(i)] != j &&
-                inBand(i, j))
+            if (inBand(i, j))
                 blocks_.link(idx(i), idx(j));
         }
     }
@@ -375,20 +395,11 @@ void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {
 }
 
 bool StereoMatcher::checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0,
-                                  const Vec2& pixel1, double radius0_px, double radius1_px,
-                                  StereoMarker& marker) {
+                                  const Vec2& pixel1, StereoMarker& marker) {
     const std::optional<TriangulatedPoint> point = triangulate(ray0, ray1);
     if (!point || point->range0_mm <= 0.0 || point->range1_mm <= 0.0 ||
         point->rayGap_mm > config_.maxRayGap_mm) {
         ++counters_.rejectedRayGap;
-        return false;
-    }
-    // Two markers on one epipolar line pair into a point at neither: each blob keeps the size of
-    // its own marker at its own range, which the point's ranges do not explain.
-    if (config_.maxSizeMismatch > 0.0 && radius0_px > 0.0 && radius1_px > 0.0 &&
-        std::abs(std::log((radius0_px * point->range0_mm) / (radius1_px * point->range1_mm))) >
-            config_.maxSizeMismatch) {
-        ++counters_.rejectedSize;
         return false;
     }
     double reprojection = 0.0;
@@ -411,15 +422,9 @@ bool StereoMatcher::checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& 
 void StereoMatcher::triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out) {
     const Prepared& p = *prepared_;
     StereoMarker candidate;
-    const std::uint64_t refusedBefore = counters_.rejectedSize;
     if (!checkedMarker(p.rays[0][idx(i)], p.rays[1][idx(j)], p.pixel[0][idx(i)], p.pixel[1][idx(j)],
-                       p.radius[0][idx(i)], p.radius[1][idx(j)], candidate)) {
-        if (counters_.rejectedSize != refusedBefore) {
-            prepared_->refusedWith[0][idx(i)] = j;
-            prepared_->refusedWith[1][idx(j)] = i;
-        }
+                       candidate))
         return;
-    }
     StereoMarker* marker = out.append();
     if (marker == nullptr) {
         ++counters_.markerOverflow;
@@ -456,8 +461,7 @@ bool StereoMatcher::triangulateBlobs(const Blob& blob0, int i, const Blob& blob1
         ++counters_.unrectifiable;
         return false;
     }
-    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, blob0.discRadius_px(),
-                       blob1.discRadius_px(), marker))
+    if (!checkedMarker(*ray0, *ray1, blob0.centre_px, blob1.centre_px, marker))
         return false;
     marker.blob0 = i;
     marker.blob1 = j;
@@ -472,19 +476,6 @@ void StereoMatcher::match(std::span<const Blob> blobs0, std::span<const Blob> bl
     if (!valid_)
         return;
     prepare(blobs0, blobs1);
-    correspond(pairs_);
-    const std::uint64_t refusedBefore = counters_.rejectedSize;
-    for (const IndexPair& pair : pairs_)
-        triangulatePair(pair.left, pair.right, out);
-    if (counters_.rejectedSize == refusedBefore)
-        return;
-    // A blob paired with another marker's blob on its epipolar line (refused for their sizes)
-    // may have its own partner among the blobs left over: they are corresponded once more.
-    Prepared& p = *prepared_;
-    for (const StereoMarker& marker : out) {
-        p.taken[0][idx(marker.blob0)] = true;
-        p.taken[1][idx(marker.blob1)] = true;
-    }
     correspond(pairs_);
     for (const IndexPair& pair : pairs_)
         triangulatePair(pair.left, pair.right, out);

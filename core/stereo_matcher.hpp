@@ -32,11 +32,19 @@ struct StereoConfig {
     double maxRayGap_mm = 1.5;
     /// A marker must reproject within this distance of both its blobs.
     double maxReprojection_px = 1.5;
-    /// A sphere's image radius times its range is the same in both cameras: a pair of blobs
-    /// whose two products differ by more than this (natural log of their ratio) is two different
-    /// markers on one epipolar line. 0 turns the test off (flat markers, which the two cameras
-    /// see at different slants).
-    double maxSizeMismatch = 0.10;
+    /// The two blobs of one sphere tell the same marker radius: blob radius times range over
+    /// the camera's pixelsPerRadian() at the blob (which holds the 1 / cos^3 growth of the image
+    /// off the axis and the lens distortion). Real images add what this leaves out: the rim a
+    /// threshold puts round a blurred edge (a fixed width in px, larger in a brighter image),
+    /// gain, vignetting and focus that differ between the views, and flat markers that each
+    /// camera sees at its own slant. So the size is a weight, not a test: G_ij of eq. 4 is
+    /// multiplied by exp(-l^2 / 2 s^2), l the log of the two radii's ratio, s^2 = sizeSigma^2 +
+    /// (sizeRimSigma_px / r0)^2 + (sizeRimSigma_px / r1)^2 for blob radii r0, r1 (px), so that
+    /// of two pairs competing for a blob the one that is one sphere wins. 0 leaves size out
+    /// (blobs without an area count as 0 too).
+    double sizeSigma = 0.15;
+    /// Uncertainty of a blob's radius from its rim (px): see sizeSigma.
+    double sizeRimSigma_px = 0.5;
     /// Two markers on one epipolar line (one of them hidden from one camera, or both seen and
     /// paired crosswise) leave blobs with two partners that both triangulate, and the
     /// correspondence may take the wrong ones. A point within this distance (mm) of where a point
@@ -97,8 +105,6 @@ struct StereoCounters {
     std::uint64_t correspondences = 0;
     std::uint64_t rejectedRayGap = 0;
     std::uint64_t rejectedReprojection = 0;
-    /// Pairs whose two blobs' sizes do not fit one sphere at the triangulated ranges.
-    std::uint64_t rejectedSize = 0;
     std::uint64_t unrectifiable = 0;
     std::uint64_t markerOverflow = 0;
 };
@@ -177,9 +183,10 @@ private:
     void collectNeighbours(int camera);
     void triangulatePair(int i, int j, BoundedVectorView<StereoMarker>& out);
     /// Triangulate two rays into \a marker's position, ray gap and reprojection, with the checks.
-    /// \a radius0_px and \a radius1_px are the blobs' radii (px), 0 where unknown.
     bool checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0, const Vec2& pixel1,
-                       double radius0_px, double radius1_px, StereoMarker& marker);
+                       StereoMarker& marker);
+    /// The size weight of sizeSigma for prepared blobs \a i and \a j (1 where a size is unknown).
+    double sizeWeight(int i, int j) const;
 
     StereoRig rig_;
     StereoConfig config_;

@@ -668,7 +668,6 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsCut = refused.cutDiscs;
     counters_.blobsSplitOnLines = refused.splitOnLines;
     counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
-    counters_.stereoPairsRefusedBySize = markers_.stereo().counters().rejectedSize;
     counters_.stereoPairsForContinuity = refused.pairsForContinuity;
     counters_.markersCarried = refused.carriedMarkers;
     counters_.markersFoundWhereExpected = refused.markersSplitWhereExpected;
@@ -779,7 +778,6 @@ std::string Firmware::statusReport() const {
     row("discs cut by an edge, centred by their arc", c.blobsCut);
     row("blobs split on the other camera's lines", c.blobsSplitOnLines);
     row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);
-    row("stereo pairs refused: blob sizes fit no one marker", c.stereoPairsRefusedBySize);
     row("stereo pairs changed to continue a marker", c.stereoPairsForContinuity);
     row("markers carried while hidden in one image", c.markersCarried);
     row("markers found where expected", c.markersFoundWhereExpected);

@@ -84,8 +84,6 @@ struct FirmwareCounters {
     /// tried for want of a frame's budget.
     std::uint64_t blobsSplitOnLines = 0;
     std::uint64_t splitsOnLinesSkipped = 0;
-    /// Stereo pairs of two blobs whose sizes fit no one sphere (two markers on one epipolar line).
-    std::uint64_t stereoPairsRefusedBySize = 0;
     /// Stereo pairs given up for another partner whose point continues a marker of the frame
     /// before.
     std::uint64_t stereoPairsForContinuity = 0;

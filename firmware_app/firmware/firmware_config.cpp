@@ -98,7 +98,8 @@ void readStereo(Section& s, StereoConfig& c) {
     s.real("min_proximity", c.minProximity, 0.0, 1.0);
     s.real("max_ray_gap_mm", c.maxRayGap_mm, 0.0, Section::kNoLimit, true);
     s.real("max_reprojection_px", c.maxReprojection_px, 0.0, Section::kNoLimit, true);
-    s.real("max_size_mismatch", c.maxSizeMismatch, 0.0, Section::kNoLimit);
+    s.real("size_sigma", c.sizeSigma, 0.0, Section::kNoLimit);
+    s.real("size_rim_px", c.sizeRimSigma_px, 0.0, Section::kNoLimit);
     s.real("continuity_mm", c.continuity_mm, 0.0, Section::kNoLimit);
     s.integer("max_carried_frames", c.maxCarriedFrames, 0, 1000);
     s.flag("seek_expected_markers", c.seekExpectedMarkers);

@@ -215,8 +215,8 @@ struct ContinuityRun {
 template <typename Fill>
 ContinuityRun runAlongALine(double continuity_mm, Fill fill) {
     MarkerPipelineConfig config;
-    // Sizes are left out: the second marker's blob has A's size, the size test tells nothing.
-    config.stereo.maxSizeMismatch = 0.0;
+    // Sizes are left out: the second marker's blob has A's size, so its size tells nothing.
+    config.stereo.sizeSigma = 0.0;
     config.stereo.continuity_mm = continuity_mm;
     MarkerPipeline pipeline(test::desktopRig(), config);
     ContinuityRun run;
@@ -502,8 +502,8 @@ ClusterRun runClosingCluster(bool seek, const std::vector<Vec3>& offsets_mm) {
                 const auto camera = static_cast<std::size_t>(c);
                 const Vec3 inCamera = rig.camera(c).toCamera(p);
                 view.visible[camera] = true;
-                view.pixel[camera] = *rig.camera(c).project(p);
-                view.radius_px[camera] = rig.camera(c).intrinsics().fx_px * 5.0 / inCamera.z();
+                view.setDisc(c, *rig.camera(c).project(p),
+                             rig.camera(c).intrinsics().fx_px * 5.0 / inCamera.z());
                 view.peak_dn[camera] = 900.0;
                 view.depth_mm[camera] = inCamera.z();
             }
