@@ -12,6 +12,7 @@
 
 #include "core/marker_set.hpp"
 #include "core/wand_finder.hpp"
+#include "firmware_app/formats/csv.hpp"
 #include "firmware_app/formats/toml_document.hpp"
 #include "firmware_app/formats/toml_table.hpp"
 
@@ -363,12 +364,10 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
 }
 
 Result<FirmwareConfig> loadFirmwareConfig(const std::filesystem::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in)
-        return Error{path.string() + ": cannot open"};
-    std::ostringstream text;
-    text << in.rdbuf();
-    return parseFirmwareConfig(text.str(), path.string());
+    Result<std::string> text = recording::readTextFile(path);
+    if (!text)
+        return text.error();
+    return parseFirmwareConfig(*text, path.string());
 }
 
 } // namespace edgetrack::app

@@ -9,6 +9,8 @@
 #include <map>
 #include <optional>
 
+#include "firmware_app/formats/csv.hpp"
+
 namespace edgetrack::recording {
 
 namespace {
@@ -221,6 +223,7 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
         return fail("last frame " + std::to_string(lastFrame) + " is before the first " +
                     std::to_string(firstFrame));
     out.frameCount = static_cast<std::size_t>(lastFrame - firstFrame + 1);
+    const std::size_t headerFrameCount = out.frameCount;
     if (std::optional<std::int64_t> frames = integer("POINT:FRAMES");
         frames && *frames > static_cast<std::int64_t>(out.frameCount))
         out.frameCount = static_cast<std::size_t>(*frames); // header words overflow at 65535
@@ -257,7 +260,12 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
     const std::size_t dataStart = (dataBlock - 1) * kBlock;
     const std::size_t sampleSize = floats ? 4 : 2;
     const std::size_t frameSize = (out.pointCount * 4 + analogPerFrame) * sampleSize;
-    if (out.pointCount > 0 && frameSize > 0 &&
+    // Frames without data take no room, so the file cannot vouch for more than its header says.
+    if (frameSize == 0 && out.frameCount > headerFrameCount)
+        return fail("POINT:FRAMES " + std::to_string(out.frameCount) +
+                    " frames of no points and no analog data: more than the header's " +
+                    std::to_string(headerFrameCount));
+    if (frameSize > 0 &&
         (dataStart > r.size() || (r.size() - dataStart) / frameSize < out.frameCount))
         return fail("truncated: " + std::to_string(out.frameCount) + " frames of " +
                     std::to_string(out.pointCount) + " points do not fit in the file");
@@ -284,12 +292,10 @@ Result<C3dPoints> parseC3d(std::string_view bytes, std::string_view name) {
 }
 
 Result<C3dPoints> readC3d(const std::filesystem::path& path) {
-    std::ifstream file(path, std::ios::binary);
-    if (!file)
-        return Error{path.string() + ": cannot open"};
-    const std::string bytes((std::istreambuf_iterator<char>(file)),
-                            std::istreambuf_iterator<char>());
-    return parseC3d(bytes, path.string());
+    Result<std::string> bytes = readTextFile(path);
+    if (!bytes)
+        return bytes.error();
+    return parseC3d(*bytes, path.string());
 }
 
 } // namespace edgetrack::recording

@@ -146,12 +146,20 @@ Result<CsvTable> parseCsv(std::string_view text, std::string_view name,
 }
 
 Result<std::string> readTextFile(const std::filesystem::path& path) {
+    std::error_code ec;
+    // A directory opens as a stream on Linux and fails only at its first read.
+    if (std::filesystem::is_directory(path, ec))
+        return Error{path.string() + ": is a directory, not a file"};
     std::ifstream in(path, std::ios::binary);
     if (!in)
         return Error{path.string() + ": cannot open for reading"};
     std::ostringstream content;
-    content << in.rdbuf();
-    if (in.bad())
+    try {
+        content << in.rdbuf();
+    } catch (const std::exception& e) {
+        return Error{path.string() + ": read error: " + e.what()};
+    }
+    if (in.bad() || (!content && in.peek() != std::ifstream::traits_type::eof()))
         return Error{path.string() + ": read error"};
     return content.str();
 }
@@ -164,22 +172,50 @@ Result<CsvTable> readCsvFile(const std::filesystem::path& path,
     return parseCsv(*text, path.string(), columns);
 }
 
+namespace {
+
+Status writeStream(const std::filesystem::path& path, std::string_view text,
+                   std::ios::openmode mode) {
+    std::ofstream out(path, std::ios::binary | mode);
+    if (!out)
+        return Error{path.string() + ": cannot open for writing"};
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.flush();
+    if (!out)
+        return Error{path.string() + ": write error (disk full?)"};
+    return Ok{};
+}
+
+} // namespace
+
 Status writeTextFileAtomically(const std::filesystem::path& path, std::string_view text) {
-    std::filesystem::path temporary = path;
-    temporary += ".tmp";
-    {
-        std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-        if (!out)
-            return Error{temporary.string() + ": cannot open for writing"};
-        out.write(text.data(), static_cast<std::streamsize>(text.size()));
-        out.flush();
-        if (!out)
-            return Error{temporary.string() + ": write error"};
-    }
+    namespace fs = std::filesystem;
     std::error_code ec;
-    std::filesystem::rename(temporary, path, ec);
-    if (ec)
-        return Error{path.string() + ": cannot replace: " + ec.message()};
+    // A symbolic link is followed: its target is the file replaced, and the link stays.
+    fs::path target = path;
+    if (fs::is_symlink(path, ec)) {
+        target = fs::weakly_canonical(path, ec);
+        if (ec)
+            return Error{path.string() + ": cannot follow the link: " + ec.message()};
+    }
+    const fs::file_status status = fs::status(target, ec);
+    if (fs::is_directory(status))
+        return Error{path.string() + ": is a directory, not a file"};
+    // A device or a FIFO (/dev/null, a pipe to another program) is written to, never replaced.
+    if (fs::exists(status) && !fs::is_regular_file(status))
+        return writeStream(target, text, std::ios::out);
+    fs::path temporary = target;
+    temporary += ".tmp";
+    if (Status s = writeStream(temporary, text, std::ios::trunc); !s) {
+        fs::remove(temporary, ec); // nothing half-written is left behind (a full disk)
+        return s;
+    }
+    fs::rename(temporary, target, ec);
+    if (ec) {
+        const std::string message = ec.message();
+        fs::remove(temporary, ec);
+        return Error{path.string() + ": cannot replace: " + message};
+    }
     return Ok{};
 }
 

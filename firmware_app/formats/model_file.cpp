@@ -9,6 +9,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "firmware_app/formats/csv.hpp"
+
 namespace edgetrack::app {
 
 namespace fs = std::filesystem;
@@ -46,14 +48,8 @@ Status writeModelJson(const fs::path& path, const MarkerModel& model, std::strin
             << number(e.distance_mm) << "]";
     }
     out << "\n  ],\n  \"s_min\": " << model.sMin << " }\n";
-    std::ofstream file(path, std::ios::binary);
-    if (!file)
-        return Error{path.string() + ": cannot create"};
-    file << out.str();
-    file.flush();
-    if (!file)
-        return Error{path.string() + ": write failed"};
-    return Ok{};
+    // Through a temporary file: a full disk leaves the old file, never an empty one.
+    return recording::writeTextFileAtomically(path, out.str());
 }
 
 Result<NamedModel> parseModelJson(std::string_view text, std::string_view name,
@@ -136,12 +132,10 @@ Result<NamedModel> parseModelJson(std::string_view text, std::string_view name,
 }
 
 Result<NamedModel> readModelJson(const fs::path& path, std::size_t maxMarkers) {
-    std::ifstream file(path, std::ios::binary);
-    if (!file)
-        return Error{path.string() + ": cannot open"};
-    const std::string text((std::istreambuf_iterator<char>(file)),
-                           std::istreambuf_iterator<char>());
-    return parseModelJson(text, path.string(), maxMarkers);
+    Result<std::string> text = recording::readTextFile(path);
+    if (!text)
+        return text.error();
+    return parseModelJson(*text, path.string(), maxMarkers);
 }
 
 Result<std::vector<NamedModel>> readModelDirectory(const fs::path& directory,

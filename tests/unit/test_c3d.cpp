@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +21,9 @@ public:
     enum class Format { IntelFloat, IntelInteger, Mips, Dec };
     explicit C3dWriter(Format format)
         : format_(format) {}
+
+    /// A POINT:FRAMES parameter (a float, as some writers store it) to add; none when empty.
+    std::optional<float> pointFrames;
 
     std::string write(const std::vector<std::vector<Vec3>>& frames,
                       const std::vector<std::vector<bool>>& valid, const std::string& units,
@@ -48,6 +52,8 @@ public:
         at = parameter(file, at, 1, "RATE", 4, {}, floatBytes(rate));
         at = parameter(file, at, 1, "UNITS", -1, {static_cast<std::uint8_t>(units.size())},
                        std::vector<std::uint8_t>(units.begin(), units.end()));
+        if (pointFrames)
+            at = parameter(file, at, 1, "FRAMES", 4, {}, floatBytes(*pointFrames));
         std::vector<std::uint8_t> labels;
         for (std::size_t p = 0; p < points; ++p) {
             std::string label = "m" + std::to_string(p);
@@ -231,6 +237,36 @@ TEST(C3d, DamagedFilesGetOneLineErrors) {
         EXPECT_EQ(e.rfind("bad.c3d: ", 0), 0u) << e;
         EXPECT_EQ(e.find('\n'), std::string::npos);
     }
+}
+
+TEST(C3d, FramesOfNoDataBeyondTheHeaderAreRefusedNotRead) {
+    // No points and POINT:FRAMES = 9.9e14 (a float): no data to check the count against, so it
+    // was believed, and reading 1e15 empty frames hung and filled memory.
+    C3dWriter writer(C3dWriter::Format::IntelFloat);
+    for (const float frames : {9.9e14F, 5.0e7F}) {
+        writer.pointFrames = frames;
+        const std::string bytes = writer.write({{}, {}}, {{}, {}}, "mm", 1.0, 100.0f);
+        const Result<C3dPoints> c3d = parseC3d(bytes, "lying.c3d");
+        ASSERT_FALSE(c3d) << frames;
+        EXPECT_NE(c3d.error().message.find("POINT:FRAMES"), std::string::npos)
+            << c3d.error().message;
+    }
+    // As many frames as the header says, with no points, is an empty recording, not an error.
+    writer.pointFrames = 2.0F;
+    const Result<C3dPoints> empty =
+        parseC3d(writer.write({{}, {}}, {{}, {}}, "mm", 1.0, 100.0f), "empty.c3d");
+    ASSERT_TRUE(empty) << empty.error().message;
+    EXPECT_EQ(empty->frameCount, 2u);
+}
+
+TEST(C3d, ADirectoryWhereTheFileShouldBeIsAnError) {
+    const std::filesystem::path directory =
+        std::filesystem::temp_directory_path() / "edgetrack_c3d_directory.c3d";
+    std::filesystem::create_directories(directory);
+    const Result<C3dPoints> c3d = readC3d(directory);
+    ASSERT_FALSE(c3d);
+    EXPECT_NE(c3d.error().message.find("is a directory"), std::string::npos);
+    std::filesystem::remove(directory);
 }
 
 TEST(C3d, EveryTruncationIsAnErrorNotACrash) {

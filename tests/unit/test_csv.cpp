@@ -1,9 +1,15 @@
 // Tests of the strict CSV parser: every malformed input gets a one-line error with file and line.
 #include <array>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <sys/stat.h>
+#include <thread>
 
 #include <gtest/gtest.h>
 
 #include "firmware_app/formats/csv.hpp"
+#include "tests/support/temp_dir.hpp"
 
 using namespace edgetrack;
 using namespace edgetrack::recording;
@@ -125,4 +131,55 @@ TEST(Csv, NumbersRoundTripExactly) {
     std::string line;
     appendCsvLine(line, std::int64_t{42}, 0.1, -1234.56789012345, 1e-300, 3.0);
     EXPECT_EQ(line, "42,0.1,-1234.56789012345,1e-300,3\n");
+}
+
+namespace {
+
+std::string contentOf(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+}
+
+} // namespace
+
+TEST(TextFile, WritingThroughALinkReplacesItsTargetAndKeepsTheLink) {
+    test::TempDir dir;
+    const std::filesystem::path target = dir.path() / "target.csv";
+    const std::filesystem::path link = dir.path() / "link.csv";
+    std::ofstream(target) << "old\n";
+    std::filesystem::create_symlink(target, link);
+    ASSERT_TRUE(writeTextFileAtomically(link, "new\n"));
+    EXPECT_TRUE(std::filesystem::is_symlink(link));
+    EXPECT_EQ(contentOf(target), "new\n");
+    EXPECT_FALSE(std::filesystem::exists(dir.path() / "target.csv.tmp"));
+    EXPECT_FALSE(std::filesystem::exists(dir.path() / "link.csv.tmp"));
+}
+
+TEST(TextFile, AFifoIsWrittenToNotReplaced) {
+    // --out FIFO: the program reading the pipe gets the data, and the pipe stays a pipe.
+    test::TempDir dir;
+    const std::filesystem::path fifo = dir.path() / "poses.csv";
+    ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+    std::string received;
+    std::thread reader([&] { received = contentOf(fifo); });
+    const Status written = writeTextFileAtomically(fifo, "frame,time_s\n");
+    reader.join();
+    ASSERT_TRUE(written) << written.error().message;
+    EXPECT_EQ(received, "frame,time_s\n");
+    EXPECT_EQ(std::filesystem::status(fifo).type(), std::filesystem::file_type::fifo);
+}
+
+TEST(TextFile, ADirectoryIsNeitherReadNorReplaced) {
+    test::TempDir dir;
+    const std::filesystem::path directory = dir.path() / "out.csv";
+    std::filesystem::create_directories(directory / "inside");
+    const Status written = writeTextFileAtomically(directory, "x\n");
+    ASSERT_FALSE(written);
+    EXPECT_NE(written.error().message.find("is a directory"), std::string::npos);
+    EXPECT_TRUE(std::filesystem::is_directory(directory / "inside"));
+    const Result<std::string> read = readTextFile(directory);
+    ASSERT_FALSE(read);
+    EXPECT_NE(read.error().message.find("is a directory"), std::string::npos);
 }

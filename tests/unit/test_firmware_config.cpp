@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "firmware_app/firmware/firmware_config.hpp"
+#include "tests/support/temp_dir.hpp"
 
 namespace edgetrack::app {
 namespace {
@@ -150,7 +151,15 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(FirmwareConfig, AMissingFileSaysSo) {
     const Result<FirmwareConfig> c = loadFirmwareConfig("/nonexistent/edgetrack.toml");
     ASSERT_FALSE(c);
-    EXPECT_EQ(c.error().message, "/nonexistent/edgetrack.toml: cannot open");
+    EXPECT_EQ(c.error().message, "/nonexistent/edgetrack.toml: cannot open for reading");
+}
+
+TEST(FirmwareConfig, ADirectoryGivenAsTheFileIsAnErrorNotTheDefaults) {
+    // --config DIR ran on the built-in defaults without a word.
+    test::TempDir dir;
+    const Result<FirmwareConfig> c = loadFirmwareConfig(dir.path());
+    ASSERT_FALSE(c);
+    EXPECT_NE(c.error().message.find("is a directory"), std::string::npos) << c.error().message;
 }
 
 } // namespace

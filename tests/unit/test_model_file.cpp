@@ -118,5 +118,17 @@ TEST(ModelFile, DirectoryReadsEveryBodyInIdOrderAndRefusesDuplicates) {
     EXPECT_FALSE(readModelDirectory(empty.path(), 64));
 }
 
+TEST(ModelFile, ADirectoryNamedLikeAModelIsAnErrorNotACrash) {
+    // `mkdir -p m/body_0.json` made every reader of the directory abort on an uncaught
+    // std::ios_base::failure.
+    test::TempDir dir;
+    std::filesystem::create_directories(dir.path() / "body_0.json");
+    const Result<std::vector<NamedModel>> models = readModelDirectory(dir.path(), 64);
+    ASSERT_FALSE(models);
+    EXPECT_NE(models.error().message.find("is a directory"), std::string::npos)
+        << models.error().message;
+    EXPECT_EQ(models.error().message.find('\n'), std::string::npos);
+}
+
 } // namespace
 } // namespace edgetrack::app
