@@ -44,6 +44,13 @@ private:
 
 } // namespace
 
+std::uint32_t dtrackCalibratedCount(std::span<const NamedModel> models) {
+    std::uint32_t count = 0;
+    for (const NamedModel& m : models)
+        count = std::max(count, m.model.id + 1);
+    return count;
+}
+
 std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out) {
     Appender a(out);
     constexpr std::int64_t kNanosPerSecond = 1'000'000'000;
@@ -51,7 +58,10 @@ std::size_t formatDtrack(const DtrackFrame& frame, std::span<char> out) {
     const std::int64_t sinceMidnight_ns =
         ((frame.midExposureUtc_ns % kNanosPerDay) + kNanosPerDay) % kNanosPerDay;
     a.print("fr %llu\r\n", static_cast<unsigned long long>(frame.frame));
-    a.print("ts %.6f\r\n", static_cast<double>(sinceMidnight_ns) * 1e-9);
+    // Whole microseconds, rounded down as in ts2, so that the two name the same instant.
+    const std::int64_t sinceMidnight_us = sinceMidnight_ns / 1000;
+    a.print("ts %lld.%06lld\r\n", static_cast<long long>(sinceMidnight_us / 1'000'000),
+            static_cast<long long>(sinceMidnight_us % 1'000'000));
     if (frame.latency_s) {
         // Whole microseconds, rounded down, so that seconds and microseconds stay one instant.
         const std::int64_t utc_us = frame.midExposureUtc_ns / 1000;

@@ -11,6 +11,7 @@
 #include "core/geometry.hpp"
 #include "core/result.hpp"
 #include "core/rigid_transform.hpp"
+#include "firmware_app/formats/named_model.hpp"
 
 namespace edgetrack::app {
 
@@ -37,7 +38,7 @@ struct DtrackFrame {
     /// Mid-exposure, UTC (ns since 1970-01-01). `ts` says it in seconds since UTC midnight,
     /// `ts2` in whole seconds and microseconds since 1970.
     std::int64_t midExposureUtc_ns = 0;
-    /// Number of calibrated bodies (`6dcal`).
+    /// `6dcal`: the highest body id + 1, as receivers drop bodies of an id at or above it.
     std::uint32_t calibrated = 0;
     std::span<const DtrackBody> bodies;
     /// Single markers: the `3d` line, sent in every frame (`3d 0` when empty), because DTrack
@@ -56,6 +57,13 @@ struct DtrackTs2 {
     /// Mid-exposure to send (us).
     std::uint32_t latency_us = 0;
 };
+
+/**
+ * \brief DTrack's `6dcal` for \a models: the highest id + 1. DTrack receivers (DTrackSDK, VRPN's
+ * driver) keep only bodies whose id is below it, so with ids that do not run from 0 (models 2 and
+ * 3 alone) the number of models would hide them.
+ */
+std::uint32_t dtrackCalibratedCount(std::span<const NamedModel> models);
 
 /**
  * \brief Write \a frame as one DTrack ASCII datagram into \a out, CRLF line ends:

@@ -702,7 +702,7 @@ void Firmware::sendOutputs(const hal::StereoFrame& frame, hal::Nanoseconds acqui
     out.number = frame.number;
     out.midExposureUtc_ns = frame.midExposure() + board_.clock.utcOffset();
     out.latency_s = last_.latency_s;
-    out.calibrated = static_cast<std::uint32_t>(models_.size());
+    out.calibrated = dtrackCalibratedCount(models_);
     out.bodies = bodies();
     outputs_.send(out, board_.udp, board_.can);
 }

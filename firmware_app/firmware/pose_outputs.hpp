@@ -36,7 +36,7 @@ struct OutputFrame {
     std::int64_t midExposureUtc_ns = 0;
     /// Mid-exposure to sending (s).
     double latency_s = 0.0;
-    /// Models on the board (DTrack's `6dcal`).
+    /// DTrack's `6dcal`: the highest model id on the board + 1 (receivers keep ids below it).
     std::uint32_t calibrated = 0;
     /// The tracker's bodies, in model order (empty while calibrating: nothing is tracked).
     std::span<const TrackedBody> bodies;

@@ -1,6 +1,8 @@
 // Tests of the DTrack ASCII output: the layout DTrack clients expect, and a round trip.
 #include <array>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -124,7 +126,8 @@ TEST(Dtrack, SendsTheMarkerLineInEveryFrameAndTheLatencyInTs2) {
     const std::int64_t utc_ns = kMidnight_ns + 45 * kSecond_ns + 123'456'789;
     std::size_t length = formatDtrack(DtrackFrame{9, utc_ns, 0, {}, markers, 0.0027}, buffer);
     std::string text(buffer.data(), length);
-    EXPECT_NE(text.find("\r\nts 45.123457\r\nts2 1795564845 123456 2700\r\n"), std::string::npos)
+    // ts and ts2 name the same whole microsecond (123'456'789 ns is 123456 us, not 123457).
+    EXPECT_NE(text.find("\r\nts 45.123456\r\nts2 1795564845 123456 2700\r\n"), std::string::npos)
         << text;
     EXPECT_NE(text.find("\r\n3d 2 [1001 1.000][1.000 2.000 3.000] [2003 1.000][-4.000 5.500 "
                         "600.250]\r\n"),
@@ -135,6 +138,36 @@ TEST(Dtrack, SendsTheMarkerLineInEveryFrameAndTheLatencyInTs2) {
     text.assign(buffer.data(), length);
     EXPECT_NE(text.find("\r\n3d 0\r\n"), std::string::npos) << text;
     EXPECT_EQ(text.find("ts2"), std::string::npos) << "no latency, no ts2 line";
+}
+
+TEST(Dtrack, TsAndTs2AgreeToTheMicrosecondInEveryFrame) {
+    // ts was rounded and ts2 truncated: about half the frames differed by 1 us.
+    std::array<char, 512> buffer{};
+    for (std::int64_t k = 0; k < 2000; ++k) {
+        const std::int64_t utc_ns = kMidnight_ns + 3 * kSecond_ns + k * 499'999 + (k % 7) * 113;
+        const std::size_t length = formatDtrack(
+            DtrackFrame{static_cast<std::uint64_t>(k), utc_ns, 0, {}, {}, 0.001}, buffer);
+        const std::string text(buffer.data(), length);
+        const std::size_t ts = text.find("\r\nts ") + 6, ts2 = text.find("ts2 ");
+        const std::string fraction = text.substr(text.find('.', ts) + 1, 6);
+        std::istringstream fields(text.substr(ts2 + 4));
+        long long seconds = 0, micros = 0;
+        fields >> seconds >> micros;
+        EXPECT_EQ(std::stoll(fraction), micros) << text;
+    }
+}
+
+TEST(Dtrack, SixDCalIsTheHighestIdPlusOne) {
+    // DTrackSDK and VRPN keep only bodies whose id is below 6dcal: with models 2 and 3 on the
+    // board, 6dcal 2 (their number) hid both.
+    const std::vector<NamedModel> models = [] {
+        std::vector<NamedModel> m(2);
+        m[0].model.id = 2;
+        m[1].model.id = 3;
+        return m;
+    }();
+    EXPECT_EQ(dtrackCalibratedCount(models), 4u);
+    EXPECT_EQ(dtrackCalibratedCount({}), 0u);
 }
 
 } // namespace
