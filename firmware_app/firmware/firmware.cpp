@@ -107,21 +107,21 @@ void Firmware::start() {
         }
         const std::size_t count = models.size();
         setModels(std::move(models));
-        flashReport_ = "loaded " + std::to_string(count) + (count == 1 ? " model" : " models") +
+        flashModels_ = "loaded " + std::to_string(count) + (count == 1 ? " model" : " models") +
                        " from flash slot " + (loaded->slot == 0 ? "A" : "B") + " (save #" +
                        std::to_string(loaded->sequence) + ")";
     } else {
         setModels({});
-        flashReport_ = loaded.error().message;
+        flashModels_ = loaded.error().message;
     }
     // The board's own rig, measured by wand, wins over the configured one.
     if (Result<StoredRig> rig = rigStore_.load(); !rig)
-        flashReport_ += "; configured rig (" + rig.error().message + ")";
+        flashRig_ = "configured rig (" + rig.error().message + ")";
     else if (!markers_.setRig(rig->rig))
-        flashReport_ += "; configured rig (the rig on flash is for another image size)";
+        flashRig_ = "configured rig (the rig on flash is for another image size)";
     else
-        flashReport_ += "; rig from flash slot " + std::string(rig->slot == 0 ? "A" : "B") +
-                        " (save #" + std::to_string(rig->sequence) + ")";
+        flashRig_ = "rig from flash slot " + std::string(rig->slot == 0 ? "A" : "B") + " (save #" +
+                    std::to_string(rig->sequence) + ")";
     changeState(FirmwareState::Tracking);
     if (Status s = board_.cameras.start(); !s) {
         enterDegraded(("cameras did not start: " + s.error().message).c_str());
@@ -163,6 +163,7 @@ Status Firmware::replaceModels(std::vector<NamedModel> models) {
     Status saved = store_.save(models);
     if (!saved)
         ++counters_.flashErrors;
+    reportModelsSaved(saved, models.size());
     setModels(std::move(models));
     return saved;
 }
@@ -355,6 +356,7 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
         ++counters_.flashErrors;
         text += ", NOT saved to flash (" + finished.saved.error().message + ")";
     }
+    reportModelsSaved(finished.saved, finished.merged.models.size());
     setModels(std::move(finished.merged.models));
     note(std::move(text));
 }
@@ -425,7 +427,10 @@ void Firmware::takeFinishedRig(FinishedRigCalibration finished) {
     std::string event = rigEvent_ + text;
     if (finished.saved) {
         event += ", saved to flash";
+        flashRig_ = "rig measured by wand, saved to flash";
     } else {
+        flashRig_ =
+            "rig measured by wand, NOT saved to flash (" + finished.saved.error().message + ")";
         ++counters_.flashErrors;
         event += ", NOT saved to flash (" + finished.saved.error().message + ")";
     }
@@ -480,12 +485,20 @@ void Firmware::waitForFinishing() {
         takeFinishedCalibration(std::move(*finished));
 }
 
+void Firmware::reportModelsSaved(const Status& saved, std::size_t count) {
+    flashModels_ =
+        saved ? std::to_string(count) + (count == 1 ? " model" : " models") + " saved to flash"
+              : "models NOT saved to flash (" + saved.error().message +
+                    "); flash holds the set from before";
+}
+
 void Firmware::deleteModels() {
     if (state_ == FirmwareState::Calibrating)
         changeState(FirmwareState::Tracking);
     const Status saved = store_.save({});
     if (!saved)
         ++counters_.flashErrors;
+    reportModelsSaved(saved, 0);
     setModels({});
     ++counters_.modelDeletions;
     statusLed_.showOnce(LedPattern::Confirm, board_.clock.now());
@@ -743,7 +756,7 @@ std::string Firmware::statusLine() const {
 std::string Firmware::statusReport() const {
     std::string out = "state " + std::string(stateName(state_)) + ", " +
                       std::to_string(models_.size()) + " models\n";
-    out += "flash: " + flashReport_ + "\n";
+    out += "flash: " + flashReport() + "\n";
     if (!lastEvent_.empty())
         out += "last event: " + lastEvent_ + "\n";
     char line[160];

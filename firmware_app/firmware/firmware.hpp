@@ -184,8 +184,9 @@ public:
     /// \return latency of the last processed frame, mid-exposure to send (s).
     double lastLatency_s() const { return last_.latency_s; }
     const OutputCounters& outputCounters() const { return outputs_.counters(); }
-    /// \return what start-up found on flash, and the last event worth telling (one line each).
-    const std::string& flashReport() const { return flashReport_; }
+    /// \return what is on flash, as start-up found it or the last save left it, and the last
+    /// event worth telling (one line each).
+    std::string flashReport() const { return flashModels_ + "; " + flashRig_; }
     const std::string& lastEvent() const { return lastEvent_; }
 
     /// \brief One status line for the console: state, frame, bodies, stage times, drops.
@@ -215,6 +216,8 @@ private:
                state_ == FirmwareState::RigFinishing;
     }
     void deleteModels();
+    /// What flashReport() says of the models after a save of \a count models that gave \a saved.
+    void reportModelsSaved(const Status& saved, std::size_t count);
     void setModels(std::vector<NamedModel> models);
 
     struct Queued;
@@ -289,7 +292,9 @@ private:
     } last_;
     FirmwareCounters counters_{};
     std::array<StageTime, kStageCount> stageTimes_{};
-    std::string flashReport_;
+    /// The models' and the rig's part of flashReport().
+    std::string flashModels_;
+    std::string flashRig_;
     std::string lastEvent_;
 };
 

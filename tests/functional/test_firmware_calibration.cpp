@@ -96,6 +96,11 @@ TEST(FirmwareOnSimBoard, ButtonCalibratesTheTwoCubesSavesThemAndTracksOverUdp) {
         << firmware.lastEvent();
     EXPECT_NE(firmware.lastEvent().find(", saved to flash"), std::string::npos)
         << firmware.lastEvent();
+    // The status view's flash line says what flash holds now, not what start-up found.
+    EXPECT_NE(firmware.flashReport().find("2 models saved to flash"), std::string::npos)
+        << firmware.flashReport();
+    EXPECT_EQ(firmware.flashReport().find("no models on flash"), std::string::npos)
+        << firmware.flashReport();
     // Two cubes are two objects, not pieces of one.
     EXPECT_EQ(firmware.lastEvent().find("pieces of one object"), std::string::npos)
         << firmware.lastEvent();
