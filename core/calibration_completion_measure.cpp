@@ -22,6 +22,28 @@ using namespace completion_detail;
 namespace {
 
 constexpr double kDegree = std::numbers::pi / 180.0;
+// A marker seen from directions up to h from their mean is seen beyond them too: a sphere's
+// reflection fades only toward grazing views, past what one session's turns happened to show.
+// Its cone of viewing directions is taken this much wider than h (degrees).
+constexpr double kCoVisibleMargin_deg = 15.0;
+
+// The pairs of n markers that can be seen together: seen so in two frames or more (together, an
+// n x n count), or whose cones of viewing directions (seenFrom, body frame) meet. A later session
+// shows the object from directions this one did not, and the tracker's search stands only on
+// edges; S_min is computed over the same edges, so it stays sound for what the tracker searches.
+std::vector<std::pair<std::uint16_t, std::uint16_t>>
+coVisiblePairs(std::size_t n, std::span<const std::uint32_t> together,
+               std::span<const std::vector<Vec3>> seenFrom) {
+    std::vector<ViewCone> cones;
+    for (std::size_t k = 0; k < n; ++k)
+        cones.push_back(viewCone(seenFrom[k], kCoVisibleMargin_deg * kDegree));
+    std::vector<std::pair<std::uint16_t, std::uint16_t>> pairs;
+    for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = i + 1; j < n; ++j)
+            if (together[i * n + j] >= 2 || coVisible(cones[i], cones[j]))
+                pairs.emplace_back(static_cast<std::uint16_t>(i), static_cast<std::uint16_t>(j));
+    return pairs;
+}
 /// Steps of the joint least squares that place the layouts for the join (refinedMarkers()): one
 /// joined the same pieces as four in every sweep, at a quarter of the cost.
 constexpr int kJoinRefineIterations = 1;
@@ -346,15 +368,18 @@ bool CalibrationCompletion::measure(const SessionBuffer& session, Body& body) {
     counters_.markersAdded += added;
     counters_.markersRemoved += removed;
     body.markers_mm = std::move(markers);
-    body.edges.clear();
-    for (std::size_t a = 0; a < accepted.size(); ++a)
-        for (std::size_t b = a + 1; b < accepted.size(); ++b) {
-            const std::size_t i = std::min(accepted[a], accepted[b]);
-            const std::size_t j = std::max(accepted[a], accepted[b]);
-            if (together[i * n + j] >= 2)
-                body.edges.emplace_back(static_cast<std::uint16_t>(a),
-                                        static_cast<std::uint16_t>(b));
+    {
+        std::vector<std::uint32_t> acceptedTogether(accepted.size() * accepted.size(), 0);
+        std::vector<std::vector<Vec3>> acceptedSeenFrom;
+        for (std::size_t a = 0; a < accepted.size(); ++a) {
+            acceptedSeenFrom.push_back(seenFrom[accepted[a]]);
+            for (std::size_t b = a + 1; b < accepted.size(); ++b)
+                acceptedTogether[a * accepted.size() + b] =
+                    together[std::min(accepted[a], accepted[b]) * n +
+                             std::max(accepted[a], accepted[b])];
         }
+        body.edges = coVisiblePairs(accepted.size(), acceptedTogether, acceptedSeenFrom);
+    }
     return added > 0 || removed > 0 || glimpsesChanged;
 }
 
@@ -383,6 +408,8 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
         kRefineRadiusFactor * std::max(config_.siteRadius_mm, body.placeRadius_mm);
     std::vector<std::uint32_t> counts(n);
     std::vector<std::uint32_t> together(n * n, 0);
+    std::vector<std::vector<Vec3>> seenFrom(n);
+    const double thinning = std::cos(0.5 * config_.sameViewAngle_deg * kDegree);
     body.framesInFour.assign(n, 0);
     std::vector<std::vector<double>> residuals(n);
     std::vector<double> scaled;
@@ -495,6 +522,10 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
             for (std::size_t i = 0; i < which.size(); ++i)
                 for (std::size_t j = i + 1; j < which.size(); ++j)
                     ++together[which[i] * n + which[j]];
+            const Vec3 viewpoint = fit->transform.inverse().apply(config_.viewpoint_rig_mm);
+            for (const std::size_t k : which)
+                keepViewDirection(seenFrom[k], (viewpoint - body.markers_mm[k]).normalized(),
+                                  thinning);
             if (which.size() >= 4)
                 for (const std::size_t k : which)
                     ++body.framesInFour[k];
@@ -529,12 +560,7 @@ void CalibrationCompletion::refine(const SessionBuffer& session, Body& body, int
     for (std::size_t k = 0; k < n && judge; ++k)
         if (!residuals[k].empty())
             body.markerResidual_mm2[k] = medianOf(residuals[k]);
-    body.edges.clear();
-    for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t j = i + 1; j < n; ++j)
-            if (together[i * n + j] >= 2)
-                body.edges.emplace_back(static_cast<std::uint16_t>(i),
-                                        static_cast<std::uint16_t>(j));
+    body.edges = coVisiblePairs(n, together, seenFrom);
 }
 
 } // namespace edgetrack

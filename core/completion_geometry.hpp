@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <numbers>
 #include <optional>
 #include <span>
 #include <vector>
@@ -280,6 +281,43 @@ inline void keepViewDirection(std::vector<Vec3>& directions, const Vec3& view, d
 inline bool seenFromNear(std::span<const Vec3> directions, const Vec3& view, double sameView) {
     return std::any_of(directions.begin(), directions.end(),
                        [&](const Vec3& d) { return d.dot(view) >= sameView; });
+}
+
+/// \brief The cone of directions a marker can be seen from, from those it was seen from: its axis
+/// the mean of \a directions (unit vectors, body frame), its half-angle the widest of them from
+/// the axis widened by \a margin_rad, at most pi (seen from everywhere: a sphere on a post).
+/// A marker seen from no direction has a negative half-angle: seen with nothing.
+struct ViewCone {
+    Vec3 axis = Vec3::UnitZ();
+    double halfAngle_rad = -1.0;
+};
+
+inline ViewCone viewCone(std::span<const Vec3> directions, double margin_rad) {
+    ViewCone cone;
+    Vec3 sum = Vec3::Zero();
+    for (const Vec3& d : directions)
+        sum += d;
+    if (directions.empty())
+        return cone;
+    if (!(sum.norm() > 1e-9 * static_cast<double>(directions.size()))) {
+        cone.halfAngle_rad = std::numbers::pi; // seen from opposite sides alike
+        return cone;
+    }
+    cone.axis = sum.normalized();
+    double widest = 0.0;
+    for (const Vec3& d : directions)
+        widest = std::max(widest, std::acos(std::clamp(d.dot(cone.axis), -1.0, 1.0)));
+    cone.halfAngle_rad = std::min(std::numbers::pi, widest + margin_rad);
+    return cone;
+}
+
+/// \brief Whether one viewing direction lies in both cones: two markers that can be seen
+/// together, though a session may never have shown them so.
+inline bool coVisible(const ViewCone& a, const ViewCone& b) {
+    if (a.halfAngle_rad < 0.0 || b.halfAngle_rad < 0.0)
+        return false;
+    const double apart = std::acos(std::clamp(a.axis.dot(b.axis), -1.0, 1.0));
+    return apart <= a.halfAngle_rad + b.halfAngle_rad;
 }
 
 /// The point of \a points_mm nearest to \a there_mm within \a radius_mm (of equally near ones,

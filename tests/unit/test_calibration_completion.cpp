@@ -168,6 +168,38 @@ TEST(LayoutRegistration, PlacesAPieceByTheOneTriangleItSharesUnlessAnotherIsLike
 // The index the triangle steps look triangles up in must give what a scan of them all gives:
 // every triangle whose longest side lies in the window, in order of that side (equal sides in
 // the order given), and it may say "none near" only where a scan finds none within its bin width.
+TEST(ViewCones, MarkersThatCanBeSeenTogetherThoughNoFrameShowedThem) {
+    // A box's faces, each seen from within 50 degrees of its normal: adjacent faces (90 degrees
+    // apart) can be seen together, opposite ones (180) cannot; a sphere on a post, seen from all
+    // round, can be seen with anything. Cones are widened by 15 degrees.
+    const double margin = 15.0 * std::numbers::pi / 180.0;
+    const auto face = [](const Vec3& normal) {
+        std::vector<Vec3> seen;
+        const Vec3 across = normal.unitOrthogonal();
+        for (int k = 0; k < 12; ++k) {
+            const double turn = 2.0 * std::numbers::pi * k / 12.0;
+            const Vec3 side = std::cos(turn) * across + std::sin(turn) * normal.cross(across);
+            const double tilt = 50.0 * std::numbers::pi / 180.0;
+            seen.push_back(std::cos(tilt) * normal + std::sin(tilt) * side);
+        }
+        return seen;
+    };
+    using completion_detail::coVisible;
+    using completion_detail::viewCone;
+    using completion_detail::ViewCone;
+    const ViewCone top = viewCone(face(Vec3::UnitZ()), margin);
+    const ViewCone side = viewCone(face(Vec3::UnitX()), margin);
+    const ViewCone bottom = viewCone(face(-Vec3::UnitZ()), margin);
+    EXPECT_NEAR(top.halfAngle_rad, (50.0 + 15.0) * std::numbers::pi / 180.0, 1e-9);
+    EXPECT_TRUE(coVisible(top, side));
+    EXPECT_FALSE(coVisible(top, bottom));
+    const std::vector<Vec3> allRound{Vec3::UnitX(), -Vec3::UnitX(), Vec3::UnitY(), -Vec3::UnitY()};
+    const ViewCone post = viewCone(allRound, margin);
+    EXPECT_TRUE(coVisible(post, bottom));
+    EXPECT_TRUE(coVisible(post, top));
+    EXPECT_FALSE(coVisible(viewCone({}, margin), top)) << "never seen: seen with nothing";
+}
+
 TEST(TrianglesByLongestSide, FindsWhatAScanOfEveryTriangleFinds) {
     using completion_detail::SortedTriangle;
     std::mt19937 random(7);
