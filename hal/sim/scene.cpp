@@ -292,6 +292,27 @@ RigidTransform rigFromScene(const RigSpec& spec) {
     return sceneFromCamera(spec, 0).inverse();
 }
 
+Scene anotherSession(const Scene& scene, std::uint64_t sessionSeed) {
+    Scene session = scene;
+    std::uint64_t stream = sessionSeed * 7919 + 0xA5;
+    for (SceneObject& object : session.objects)
+        object.motion = Motion(object.motion.spec(), ++stream);
+    for (Occluder& occluder : session.occluders)
+        occluder.motion = Motion(occluder.motion.spec(), ++stream);
+    if (session.occluders.empty()) {
+        Vec3 centre = Vec3::Zero();
+        for (const SceneObject& object : session.objects)
+            centre += object.motion.spec().centre_rig_mm;
+        if (!session.objects.empty())
+            centre /= static_cast<double>(session.objects.size());
+        session.occluders.push_back(
+            {Motion(passingHand(centre - Vec3(0.0, 0.0, 120.0), 0.11), ++stream), 40.0});
+    }
+    session.spurious.staticPerCamera = std::max(session.spurious.staticPerCamera, 3);
+    session.spurious.flickeringPerCamera = std::max(session.spurious.flickeringPerCamera, 6);
+    return session;
+}
+
 MotionSpec passingHand(const Vec3& centre_rig_mm, double frequency_hz) {
     MotionSpec hand;
     hand.centre_rig_mm = centre_rig_mm;

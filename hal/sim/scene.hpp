@@ -91,6 +91,7 @@ public:
 
     /// \return T_rig_from_object at time \a t_s.
     RigidTransform poseAt(double t_s) const;
+    const MotionSpec& spec() const { return spec_; }
 
 private:
     struct Wave {
@@ -205,6 +206,14 @@ struct Scene {
     /// Noise of each coordinate of a point at points level (mm, standard deviation).
     double pointNoise_mm = 0.05;
 };
+
+/**
+ * \brief Another session with \a scene's objects: the same objects and rig, each moving as
+ * before in kind but with its own phases and turning axes drawn from \a sessionSeed (so the
+ * cameras see each object from other directions), a hand passing in front of them, and at least
+ * six glints per camera that come and go. A user calibrates once and tracks in sessions like it.
+ */
+Scene anotherSession(const Scene& scene, std::uint64_t sessionSeed);
 
 struct SceneInfo {
     const char* name;

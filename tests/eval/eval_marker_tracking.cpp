@@ -46,6 +46,11 @@ struct Totals {
     /// False markers by what their two images are: two different markers' images (a ghost of two
     /// markers on one epipolar line), one marker's two images (a centre off), or neither.
     std::uint64_t falseOfTwoMarkers = 0;
+    /// Of those, the two markers each hidden from the camera that sees the other: two rays that
+    /// meet with nothing in either image to tell them from a marker.
+    std::uint64_t falseOfTwoHidden = 0;
+    /// False markers of the same stereo on exact blobs (every marker's true centre and size).
+    std::uint64_t falseFromExactBlobs = 0;
     std::uint64_t falseOfOneMarker = 0;
     /// Of the false markers, those carried while hidden in one image (StereoMarker::carried).
     std::uint64_t falseCarried = 0;
@@ -254,6 +259,12 @@ bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
             const std::vector<bool> exact = foundMarkers(observation, exactBlobs.points_rig_mm());
             totals.foundFromExactBlobs +=
                 static_cast<std::uint64_t>(std::count(exact.begin(), exact.end(), true));
+            for (const Vec3& p : exactBlobs.points_rig_mm()) {
+                bool real = false;
+                for (const sim::MarkerView& m : observation.markers)
+                    real = real || (m.position_rig_mm - p).norm() < 3.0;
+                totals.falseFromExactBlobs += real ? 0U : 1U;
+            }
             const std::vector<bool> atImages = foundMarkers(observation, points);
             for (std::size_t i = 0; i < observation.markers.size(); ++i) {
                 if (!exact[i])
@@ -357,8 +368,15 @@ bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
                 totals.falseCarried += pipeline.markers()[k].carried ? 1U : 0U;
                 const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
                 const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
-                if (seen0 >= 0 && seen1 >= 0)
+                if (seen0 >= 0 && seen1 >= 0) {
                     ++(seen0 == seen1 ? totals.falseOfOneMarker : totals.falseOfTwoMarkers);
+                    totals.falseOfTwoHidden +=
+                        seen0 != seen1 &&
+                                !observation.markers[static_cast<std::size_t>(seen0)].visible[1] &&
+                                !observation.markers[static_cast<std::size_t>(seen1)].visible[0]
+                            ? 1U
+                            : 0U;
+                }
             }
         }
         previousIdOfTruth.swap(idOfTruth);
@@ -522,6 +540,10 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(totals.falseOfOneMarker),
                 static_cast<unsigned long long>(totals.falseMarkers - totals.falseOfTwoMarkers -
                                                 totals.falseOfOneMarker));
+    std::printf("  of the two markers' false markers, each marker hidden from the camera that sees "
+                "the other: %llu; false markers from exact blobs: %llu\n",
+                static_cast<unsigned long long>(totals.falseOfTwoHidden),
+                static_cast<unsigned long long>(totals.falseFromExactBlobs));
     std::printf("  of all %llu markers seen by both cameras, merged or not: %.4f%% found\n",
                 static_cast<unsigned long long>(totals.visibleToBoth),
                 100.0 * static_cast<double>(totals.found + totals.foundOfMerged) /

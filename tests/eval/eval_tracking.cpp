@@ -1,7 +1,8 @@
 // Measures model-based tracking on simulated scenes against the simulator's true poses.
 //
 //   eval_tracking --scene two_cubes [--models MODELDIR | --calibrate-frames N [--calibrate-seed S]
-//                 [--write-models DIR]] [--frames 2000] [--seed 3] [--level images|points]
+//                 [--write-models DIR] [--other-session]] [--frames 2000] [--seed 3]
+//                 [--level images|points]
 //                 [--require-found 0.995] [--require-wrong 0.001]
 //                 [--require-position-rms 0.3] [--require-rotation-rms 0.2]
 //
@@ -55,6 +56,11 @@ struct BodyStats {
     std::size_t foundEligible = 0; // of those, found
     std::size_t foundOther = 0;    // found with fewer than S_min reconstructed (by prediction)
     std::size_t wrong = 0;         // found, but far from its truth
+    // Returns: an eligible frame after kAbsence_frames or more in which the body was neither
+    // eligible nor found (out of view, hidden, turned away), and of them, found right at once.
+    std::size_t returns = 0;
+    std::size_t returnsFoundAtOnce = 0;
+    std::size_t absentFor = 0;
     std::vector<double> position_mm;
     std::vector<double> rotation_deg;
     std::vector<double> fitRms_mm;
@@ -62,6 +68,8 @@ struct BodyStats {
     std::vector<double> positionFew_mm;
     std::vector<double> rotationFew_deg;
 };
+
+constexpr std::size_t kAbsence_frames = 10;
 
 double percentile(std::vector<double> values, double share) {
     if (values.empty())
@@ -130,13 +138,24 @@ int main(int argc, char** argv) {
     app.add_flag("--cold", cold, "forget every body before each frame: the search alone");
     bool verbose = false;
     app.add_flag("--verbose", verbose, "print every wrong pose");
+    bool allPairs = false;
+    app.add_flag("--all-pairs", allPairs,
+                 "give the tracker every pair of each model as an edge, S_min computed again");
+    bool otherSession = false;
+    app.add_flag("--other-session", otherSession,
+                 "track in another session of the calibration's objects (sim::anotherSession of "
+                 "--calibrate-seed's scene, drawn from --seed): other motion, viewing directions, "
+                 "clutter and a passing hand");
     app.add_option("--require-found", requireFound, "share of eligible frames found");
     app.add_option("--require-wrong", requireWrong, "largest share of found frames that are wrong");
     app.add_option("--require-position-rms", requirePositionRms, "mm");
     app.add_option("--require-rotation-rms", requireRotationRms, "degrees");
     CLI11_PARSE(app, argc, argv);
 
-    std::optional<sim::Scene> scene = sim::makeScene(sceneName, seed);
+    std::optional<sim::Scene> scene =
+        sim::makeScene(sceneName, otherSession ? calibrateSeed : seed);
+    if (scene && otherSession)
+        scene = sim::anotherSession(*scene, seed);
     if (!scene) {
         std::fprintf(stderr, "unknown scene %s\n", sceneName.c_str());
         return 2;
@@ -167,6 +186,17 @@ int main(int argc, char** argv) {
             models.push_back(std::move(named.model));
     }
 
+    if (allPairs) {
+        for (MarkerModel& m : models) {
+            m.edges.clear();
+            for (std::size_t i = 0; i < m.markers_model_mm.size(); ++i)
+                for (std::size_t j = i + 1; j < m.markers_model_mm.size(); ++j)
+                    m.edges.push_back({static_cast<std::uint16_t>(i), static_cast<std::uint16_t>(j),
+                                       (m.markers_model_mm[i] - m.markers_model_mm[j]).norm()});
+        }
+        computeSmin(models, SminConfig{});
+    }
+
     // Lay each model onto the layouts; copies of one layout list every object they fit.
     std::vector<std::vector<Vec3>> layouts;
     for (const sim::SceneObject& o : world.scene().objects) {
@@ -179,10 +209,14 @@ int main(int argc, char** argv) {
         RigidTransform T_object_from_model;
     };
     std::vector<std::vector<Fit>> fits(models.size());
+    // Learnt whole: every object one model of all its markers and no other (for the summary).
+    std::vector<std::size_t> wholeModelsOf(layouts.size(), 0);
     for (std::size_t b = 0; b < models.size(); ++b) {
         std::size_t bestMatched = 0;
         for (std::size_t k = 0; k < layouts.size(); ++k) {
             const test::ModelAlignment a = test::alignModel(models[b], layouts[k], kAlign_mm);
+            wholeModelsOf[k] += a.matched == layouts[k].size() &&
+                                models[b].markers_model_mm.size() == layouts[k].size();
             if (a.matched < 4 || a.matched + 1 < bestMatched)
                 continue;
             if (a.matched > bestMatched + 1)
@@ -256,6 +290,9 @@ int main(int argc, char** argv) {
             BodyStats& s = stats[b];
             const bool eligible = reconstructed[k] >= models[b].sMin;
             s.eligible += eligible;
+            const bool returning = eligible && s.absentFor >= kAbsence_frames;
+            s.returns += returning;
+            s.absentFor = eligible || body.found() ? 0 : s.absentFor + 1;
             if (!body.found()) {
                 if (verbose && eligible)
                     std::printf("frame %lld body %u missed with %zu markers reconstructed\n",
@@ -269,6 +306,7 @@ int main(int argc, char** argv) {
             const double rotation =
                 rotationAngleBetween_rad(truth.rotation, body.T_rig_from_model.rotation) * 180.0 /
                 std::numbers::pi;
+            s.returnsFoundAtOnce += returning && position <= kWrong_mm && rotation <= kWrong_deg;
             if (position > kWrong_mm || rotation > kWrong_deg) {
                 ++s.wrong;
                 if (verbose)
@@ -328,6 +366,9 @@ int main(int argc, char** argv) {
                     s.foundOther);
         std::printf("  wrong pose in %zu of %zu found frames (%.3f%%)\n", s.wrong, found,
                     100.0 * wrongShare);
+        std::printf("  returns (eligible after %zu or more frames absent): %zu, found in that very "
+                    "frame: %zu\n",
+                    kAbsence_frames, s.returns, s.returnsFoundAtOnce);
         std::printf("  position error mm: rms %.3f, median %.3f, 95%% %.3f, 99%% %.3f, max %.3f\n",
                     positionRms, percentile(s.position_mm, 0.5), percentile(s.position_mm, 0.95),
                     percentile(s.position_mm, 0.99), percentile(s.position_mm, 1.0));
@@ -364,6 +405,21 @@ int main(int argc, char** argv) {
             status = 1;
         }
     }
+    // One line for sweeps (tests/eval/cross_session_sweep.sh): the totals over the bodies.
+    BodyStats all;
+    for (const BodyStats& s : stats) {
+        all.eligible += s.eligible;
+        all.foundEligible += s.foundEligible;
+        all.wrong += s.wrong;
+        all.returns += s.returns;
+        all.returnsFoundAtOnce += s.returnsFoundAtOnce;
+    }
+    const bool whole =
+        models.size() == layouts.size() && std::all_of(wholeModelsOf.begin(), wholeModelsOf.end(),
+                                                       [](std::size_t n) { return n == 1; });
+    std::printf("summary: whole %d eligible %zu found %zu wrong %zu returns %zu at-once %zu\n",
+                whole ? 1 : 0, all.eligible, all.foundEligible, all.wrong, all.returns,
+                all.returnsFoundAtOnce);
     const ModelTrackingCounters& c = tracker.counters();
     std::printf(
         "tracker: %.1f us a frame on average, 99%% %.1f us, max %.1f us (this machine)\n",
