@@ -42,9 +42,9 @@ struct StereoConfig {
     /// (sizeRimSigma_px / r0)^2 + (sizeRimSigma_px / r1)^2 for blob radii r0, r1 (px), so that
     /// of two pairs competing for a blob the one that is one sphere wins. 0 leaves size out
     /// (blobs without an area count as 0 too).
-    double sizeSigma = 0.08;
+    double sizeSigma = 0.05;
     /// Uncertainty of a blob's radius from its rim (px): see sizeSigma.
-    double sizeRimSigma_px = 0.3;
+    double sizeRimSigma_px = 0.2;
     /// Two markers on one epipolar line (one of them hidden from one camera, or both seen and
     /// paired crosswise) leave blobs with two partners that both triangulate, and the
     /// correspondence may take the wrong ones. A point within this distance (mm) of where a point

@@ -9,6 +9,7 @@
 // Renders each frame at images level, runs the core pipeline exactly as the firmware does, and
 // compares with the simulator's truth. Exits 1 when a --require target is missed.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <map>
@@ -51,6 +52,10 @@ struct Totals {
     std::uint64_t falseOfTwoHidden = 0;
     /// False markers of the same stereo on exact blobs (every marker's true centre and size).
     std::uint64_t falseFromExactBlobs = 0;
+    /// |log| of the ratio of the marker radii a true pair's two blobs tell (StereoConfig::
+    /// sizeSigma), over separately visible markers found; and over false markers.
+    std::vector<double> trueSizeLogRatio;
+    std::vector<double> falseSizeLogRatio;
     std::uint64_t falseOfOneMarker = 0;
     /// Of the false markers, those carried while hidden in one image (StereoMarker::carried).
     std::uint64_t falseCarried = 0;
@@ -110,6 +115,24 @@ constexpr double kFoundRadius_mm = 2.0;
 /// A blob this near a marker's true centre in an image (px) is that marker's.
 constexpr double kAtMarker_px = 1.5;
 
+/// |log| of the ratio of the two sphere radii marker \a k's blobs tell (radius times range over
+/// pixelsPerRadian); -1 when it has no two blobs with areas.
+double sizeLogRatio(const StereoRig& rig, const MarkerPipeline& pipeline, std::size_t k) {
+    const StereoMarker& m = pipeline.markers()[k];
+    if (m.carried || m.blob0 < 0 || m.blob1 < 0)
+        return -1.0;
+    double radius_mm[2];
+    for (int c = 0; c < 2; ++c) {
+        const Blob& b = pipeline.blobs(c)[static_cast<std::size_t>(c == 0 ? m.blob0 : m.blob1)];
+        const Vec3 toPoint = m.position_rig_mm - rig.camera(c).centre_rig_mm();
+        const double scale = rig.camera(c).pixelsPerRadian(toPoint);
+        if (!(b.area_px > 0.0F) || !(scale > 0.0))
+            return -1.0;
+        radius_mm[c] = b.discRadius_px() * toPoint.norm() / scale;
+    }
+    return std::abs(std::log(radius_mm[0] / radius_mm[1]));
+}
+
 const Blob* blobAt(std::span<const Blob> blobs, const Vec2& at_px) {
     const Blob* nearest = nullptr;
     for (const Blob& b : blobs)
@@ -161,6 +184,8 @@ struct RenderRun {
     std::string scene;
     /// randomRig()'s seed: 0 the project's rig.
     std::uint64_t rig = 0;
+    /// Every marker that sits on a surface drawn as a flat foil disc (MarkerObject::flatMarkers).
+    bool flatMarkers = false;
     std::int64_t frames = 0;
     std::string matcher;
     MarkerPipelineConfig pipeline;
@@ -176,6 +201,8 @@ bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
         return false;
     if (run.rig != 0)
         scene->rig = sim::randomRig(run.rig);
+    for (sim::SceneObject& object : scene->objects)
+        object.object.flatMarkers = run.flatMarkers;
     const sim::World world(std::move(*scene), seed);
     test::SimImagePipeline images(world, seed, run.pipeline);
     const MarkerPipeline& pipeline = images.pipeline();
@@ -328,6 +355,10 @@ bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
                 continue;
             }
             used[static_cast<std::size_t>(nearest)] = true;
+            if (const double l =
+                    sizeLogRatio(world.rig(), pipeline, static_cast<std::size_t>(nearest));
+                l >= 0.0)
+                totals.trueSizeLogRatio.push_back(l);
             ++totals.found;
             totals.squaredError += nearestDistance * nearestDistance;
             totals.maxError = std::max(totals.maxError, nearestDistance);
@@ -365,6 +396,8 @@ bool evaluateRender(const RenderRun& run, std::uint64_t seed, Totals& totals) {
                 ++totals.spuriousPointsFound;
             } else if (!real) {
                 ++totals.falseMarkers;
+                if (const double l = sizeLogRatio(world.rig(), pipeline, k); l >= 0.0)
+                    totals.falseSizeLogRatio.push_back(l);
                 totals.falseCarried += pipeline.markers()[k].carried ? 1U : 0U;
                 const int seen0 = markerImageAt(world.rig(), observation, points[k], 0);
                 const int seen1 = markerImageAt(world.rig(), observation, points[k], 1);
@@ -420,6 +453,9 @@ int main(int argc, char** argv) {
     app.add_option("--renders", renders, "renders of consecutive seeds, counts pooled")
         ->check(CLI::PositiveNumber);
     std::uint64_t rig = 0, rigs = 1;
+    bool flatMarkers = false;
+    app.add_flag("--flat-markers", flatMarkers,
+                 "draw the markers that sit on a surface as flat foil discs (slanted ellipses)");
     app.add_option("--rig", rig,
                    "randomRig() seed of the rig (0: the project's own), or the first of --rigs");
     app.add_option("--rigs", rigs,
@@ -465,7 +501,8 @@ int main(int argc, char** argv) {
     bool everyRig = true;
     double worstFoundOfExact = 1.0, worstFalseOfAll = 0.0;
     for (std::uint64_t r = rig; r < rig + rigs; ++r) {
-        const RenderRun run{sceneName, r, frames, matcher, pipelineConfig, trackConfig};
+        const RenderRun run{sceneName,      r,          flatMarkers, frames, matcher,
+                            pipelineConfig, trackConfig};
         const Totals before = totals;
         for (std::uint64_t render = seed; render < seed + renders; ++render)
             if (!evaluateRender(run, render, totals)) {
@@ -540,6 +577,20 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long long>(totals.falseOfOneMarker),
                 static_cast<unsigned long long>(totals.falseMarkers - totals.falseOfTwoMarkers -
                                                 totals.falseOfOneMarker));
+    const auto quantiles = [](std::vector<double> v) {
+        std::sort(v.begin(), v.end());
+        const auto at = [&](double q) {
+            return v.empty() ? 0.0
+                             : v[static_cast<std::size_t>(q * static_cast<double>(v.size() - 1))];
+        };
+        return std::array<double, 4>{at(0.5), at(0.9), at(0.99), at(0.999)};
+    };
+    const std::array<double, 4> trueSizes = quantiles(totals.trueSizeLogRatio);
+    const std::array<double, 4> falseSizes = quantiles(totals.falseSizeLogRatio);
+    std::printf(
+        "  |log| of the two blobs' sphere radii: true pairs median %.3f, 90%% %.3f, 99%% %.3f, "
+        "99.9%% %.3f; false markers median %.3f, 90%% %.3f\n",
+        trueSizes[0], trueSizes[1], trueSizes[2], trueSizes[3], falseSizes[0], falseSizes[1]);
     std::printf("  of the two markers' false markers, each marker hidden from the camera that sees "
                 "the other: %llu; false markers from exact blobs: %llu\n",
                 static_cast<unsigned long long>(totals.falseOfTwoHidden),
