@@ -784,6 +784,7 @@ MarkerPipelineCounters MarkerPipeline::counters() const {
         c.splitBlobs += detectors_[camera].counters().splitBlobs;
         c.splitRefused += detectors_[camera].counters().splitRefused;
         c.cutDiscs += detectors_[camera].counters().cutDiscs;
+        c.ellipses += detectors_[camera].counters().ellipses;
         c.splitOnLines += detectors_[camera].counters().splitOnLines;
         c.labelOverflow += detectors_[camera].counters().labelOverflow;
         // The detector chooses which blobs fit and counts the rest; the blob vectors count blobs

@@ -33,6 +33,8 @@ struct MarkerPipelineCounters {
     std::uint64_t splitRefused = 0;
     /// Discs cut by an edge in front of them, centred by their visible arc.
     std::uint64_t cutDiscs = 0;
+    /// Blobs not round (or perhaps merged) kept whole as one marker's elliptic image.
+    std::uint64_t ellipses = 0;
     /// Blobs of two discs split on the epipolar lines of the other camera's separate blobs.
     std::uint64_t splitOnLines = 0;
     /// Splits on epipolar lines not tried for want of the frame's budget (a burst of blobs).

@@ -679,6 +679,7 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     counters_.blobsSplit = refused.splitBlobs;
     counters_.blobsNotSplit = refused.splitRefused;
     counters_.blobsCut = refused.cutDiscs;
+    counters_.blobsOneEllipse = refused.ellipses;
     counters_.blobsSplitOnLines = refused.splitOnLines;
     counters_.splitsOnLinesSkipped = refused.splitAttemptsSkipped;
     counters_.stereoPairsForContinuity = refused.pairsForContinuity;
@@ -788,6 +789,7 @@ std::string Firmware::statusReport() const {
     row("blobs refused (capacity)", c.blobOverflow);
     row("blobs of touching markers split", c.blobsSplit);
     row("blobs not round, not split", c.blobsNotSplit);
+    row("blobs one ellipse (one marker off the axis or at a slant)", c.blobsOneEllipse);
     row("discs cut by an edge, centred by their arc", c.blobsCut);
     row("blobs split on the other camera's lines", c.blobsSplitOnLines);
     row("splits on lines not tried (frame budget)", c.splitsOnLinesSkipped);

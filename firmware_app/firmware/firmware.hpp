@@ -80,6 +80,8 @@ struct FirmwareCounters {
     std::uint64_t blobsNotSplit = 0;
     /// Discs cut by an edge in front of them, centred by their visible arc.
     std::uint64_t blobsCut = 0;
+    /// Blobs not round kept whole: one marker's image, an ellipse (off the axis, at a slant).
+    std::uint64_t blobsOneEllipse = 0;
     /// Blobs split by stereo on the epipolar lines of the other camera's blobs, and splits not
     /// tried for want of a frame's budget.
     std::uint64_t blobsSplitOnLines = 0;

@@ -83,6 +83,7 @@ void readBlobs(Section& s, BlobDetectorConfig& b) {
     s.integer("max_area_px", b.maxArea_px, 1, 1 << 20);
     s.real("max_elongation", b.maxElongation, 1.0);
     s.real("min_fill", b.minFill, 0.0, 1.0);
+    s.real("max_marker_elongation", b.maxMarkerElongation, 1.0);
     s.integer("max_blobs", b.maxBlobs, 1, 65535);
     s.real("keep_near_px", b.keepNear_px, 0.0);
     s.integer("max_labels", b.maxLabels, 16, kMaxCount);
