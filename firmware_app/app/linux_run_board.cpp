@@ -64,7 +64,12 @@ public:
 
     hal::Board& board() override { return linux_.board(); }
     const StereoRig& rig() const override { return rig_; }
-    std::string describe() const override { return "Linux board; " + linux_.cameras().describe(); }
+    std::string describe() const override {
+        std::string text = "Linux board; " + linux_.cameras().describe();
+        if (!linux_.flashWarnings().empty())
+            text += "; DEGRADED: " + linux_.flashWarnings();
+        return text;
+    }
     std::string devicesName() const override { return "cameras, GPIO"; }
     bool devicesUp(std::string& why) override { return linux_.devicesUp(why); }
     bool needsProcessRestart() const override { return linux_.cameras().needsProcessRestart(); }

@@ -110,6 +110,10 @@ void Firmware::start() {
         flashModels_ = "loaded " + std::to_string(count) + (count == 1 ? " model" : " models") +
                        " from flash slot " + (loaded->slot == 0 ? "A" : "B") + " (save #" +
                        std::to_string(loaded->sequence) + ")";
+        // A damaged slot beside it may have held a later save: the user should know.
+        if (!loaded->otherSlotProblem.empty())
+            flashModels_ += "; " + loaded->otherSlotProblem +
+                            ": a later save may be lost, calibrate again or import it";
     } else {
         setModels({});
         flashModels_ = loaded.error().message;

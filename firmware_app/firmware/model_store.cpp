@@ -113,7 +113,8 @@ Result<StoredModels> ModelStore::load() {
         });
     if (!stored)
         return stored.error();
-    return StoredModels{std::move(models), stored->sequence, stored->slot};
+    return StoredModels{std::move(models), stored->sequence, stored->slot,
+                        std::move(stored->otherSlotProblem)};
 }
 
 Status ModelStore::save(std::span<const NamedModel> models) {

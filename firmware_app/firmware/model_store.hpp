@@ -21,6 +21,8 @@ struct StoredModels {
     std::vector<NamedModel> models;
     std::uint32_t sequence = 0;
     int slot = 0;
+    /// StoredPayload::otherSlotProblem.
+    std::string otherSlotProblem;
 };
 
 /**

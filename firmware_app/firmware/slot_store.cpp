@@ -137,7 +137,11 @@ Result<StoredPayload> SlotStore::load(
             c.report.why = std::move(*refused);
             continue;
         }
-        return StoredPayload{std::move(c.payload), c.report.sequence, slot};
+        const SlotReport& other = slots[static_cast<std::size_t>(1 - slot)].report;
+        std::string problem;
+        if (other.state == SlotState::Corrupt)
+            problem = std::string(slot == 0 ? "slot B" : "slot A") + " corrupt (" + other.why + ")";
+        return StoredPayload{std::move(c.payload), c.report.sequence, slot, std::move(problem)};
     }
     std::string why;
     for (int slot : {0, 1}) {

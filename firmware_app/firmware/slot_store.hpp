@@ -36,6 +36,9 @@ struct StoredPayload {
     std::vector<std::uint8_t> bytes;
     std::uint32_t sequence = 0;
     int slot = 0;
+    /// The other slot when it is corrupt (a torn or damaged save, perhaps a newer one than this):
+    /// "slot B corrupt (payload CRC mismatch)"; empty when it is valid or empty.
+    std::string otherSlotProblem;
 };
 
 /**

@@ -15,17 +15,24 @@ namespace edgetrack::app {
 
 namespace {
 
-Result<FlashSettings> flashSettings(const ModelCommandOptions& options) {
+/// The flash partition and how many models the board keeps, from --config (or the defaults).
+struct BoardSettings {
     FlashSettings flash;
+    std::size_t maxModels = FirmwareConfig{}.maxModels;
+};
+
+Result<BoardSettings> boardSettings(const ModelCommandOptions& options) {
+    BoardSettings board;
     if (!options.config.empty()) {
         Result<FirmwareConfig> config = loadFirmwareConfig(options.config);
         if (!config)
             return config.error();
-        flash = config->flash;
+        board.flash = config->flash;
+        board.maxModels = config->maxModels;
     }
     if (!options.flash.empty())
-        flash.device = options.flash;
-    return flash;
+        board.flash.device = options.flash;
+    return board;
 }
 
 Result<std::vector<NamedModel>> loadFromFlash(const FlashSettings& settings) {
@@ -35,6 +42,8 @@ Result<std::vector<NamedModel>> loadFromFlash(const FlashSettings& settings) {
     linux_hal::FileFlash flash(settings.device, settings.size_bytes, settings.eraseBlock_bytes);
     if (!flash.isValid())
         return Error{flash.error()};
+    if (!flash.warning().empty())
+        std::fprintf(stderr, "edgetrack model: %s\n", flash.warning().c_str());
     ModelStore store(flash, MarkerSet::kCapacity);
     Result<StoredModels> stored = store.load();
     if (!stored)
@@ -56,9 +65,10 @@ void printList(const std::vector<NamedModel>& models, std::ostream& out) {
 } // namespace
 
 Status runModelCommand(const ModelCommandOptions& options, std::ostream& out) {
-    Result<FlashSettings> settings = flashSettings(options);
-    if (!settings)
-        return settings.error();
+    Result<BoardSettings> board = boardSettings(options);
+    if (!board)
+        return board.error();
+    const FlashSettings* settings = &board->flash;
     const bool fromDirectory = !options.models.empty();
 
     if (options.action == "import") {
@@ -68,10 +78,17 @@ Status runModelCommand(const ModelCommandOptions& options, std::ostream& out) {
             readModelDirectory(options.models, MarkerSet::kCapacity);
         if (!models)
             return models.error();
+        // The board would keep only max_models of them and say so in a counter nobody reads.
+        if (models->size() > board->maxModels)
+            return Error{options.models.string() + ": " + std::to_string(models->size()) +
+                         " models; the board keeps at most " + std::to_string(board->maxModels) +
+                         " ([tracking] max_models): nothing imported"};
         linux_hal::FileFlash flash(settings->device, settings->size_bytes,
                                    settings->eraseBlock_bytes);
         if (!flash.isValid())
             return Error{flash.error()};
+        if (!flash.warning().empty())
+            return Error{flash.warning()};
         ModelStore store(flash, MarkerSet::kCapacity);
         if (Status s = store.save(*models); !s)
             return Error{settings->device.string() + ": " + s.error().message};

@@ -1,6 +1,7 @@
 // Linux backend: flash partition in a file with NOR erase/program semantics and fdatasync.
 #include "hal/linux/file_flash.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
@@ -37,6 +38,7 @@ FileFlash::FileFlash(const std::filesystem::path& path, std::size_t size,
         return;
     }
     fd_ = fd;
+    fileSize_ = size_;
     if (info.st_size == 0) {
         // A new partition starts erased.
         const std::vector<std::uint8_t> erased(size_, 0xFF);
@@ -46,10 +48,10 @@ FileFlash::FileFlash(const std::filesystem::path& path, std::size_t size,
             fd_ = -1;
         }
     } else if (static_cast<std::size_t>(info.st_size) != size_) {
-        error_ = path_ + ": holds " + std::to_string(info.st_size) + " bytes, the partition is " +
-                 std::to_string(size_);
-        ::close(fd_);
-        fd_ = -1;
+        fileSize_ = std::min(size_, static_cast<std::size_t>(info.st_size));
+        warning_ = path_ + ": holds " + std::to_string(info.st_size) + " bytes, the partition is " +
+                   std::to_string(size_) +
+                   ": read as far as it goes and never written (saves fail) until it is fixed";
     }
 }
 
@@ -86,10 +88,13 @@ Status FileFlash::writeBytes(std::size_t offset, std::span<const std::uint8_t> d
 Status FileFlash::read(std::size_t offset, std::span<std::uint8_t> out) {
     if (Status s = checkRange("read", offset, out.size()); !s)
         return s;
+    // Past the end of a short file reads as erased.
+    const std::size_t inFile = offset >= fileSize_ ? 0 : std::min(out.size(), fileSize_ - offset);
+    std::fill(out.begin() + static_cast<std::ptrdiff_t>(inFile), out.end(), std::uint8_t{0xFF});
     std::size_t done = 0;
-    while (done < out.size()) {
+    while (done < inFile) {
         const ssize_t n =
-            ::pread(fd_, out.data() + done, out.size() - done, static_cast<off_t>(offset + done));
+            ::pread(fd_, out.data() + done, inFile - done, static_cast<off_t>(offset + done));
         if (n < 0 && errno == EINTR)
             continue;
         if (n <= 0)
@@ -102,6 +107,8 @@ Status FileFlash::read(std::size_t offset, std::span<std::uint8_t> out) {
 Status FileFlash::erase(std::size_t offset, std::size_t length) {
     if (Status s = checkRange("erase", offset, length); !s)
         return s;
+    if (!warning_.empty())
+        return Error{warning_};
     if (offset % eraseBlockSize_ != 0 || length % eraseBlockSize_ != 0)
         return Error{path_ + ": erase must cover whole blocks"};
     const std::vector<std::uint8_t> erased(length, 0xFF);
@@ -111,6 +118,8 @@ Status FileFlash::erase(std::size_t offset, std::size_t length) {
 Status FileFlash::write(std::size_t offset, std::span<const std::uint8_t> data) {
     if (Status s = checkRange("write", offset, data.size()); !s)
         return s;
+    if (!warning_.empty())
+        return Error{warning_};
     // NOR programming only clears bits: what lands is old & new.
     std::vector<std::uint8_t> merged(data.size());
     if (Status s = read(offset, merged); !s)

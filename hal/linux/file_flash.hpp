@@ -13,8 +13,11 @@ namespace edgetrack::linux_hal {
  *
  * Erase writes 0xFF; write ANDs the data into what is there (as NOR programming clears bits); each
  * erase and write is followed by fdatasync, so the order the model store relies on (payload before
- * header) holds across a power cut. A missing file is created erased at the given size; an
- * existing one must have exactly that size.
+ * header) holds across a power cut. A missing file is created erased at the given size. An
+ * existing one of another size (a truncated copy, a file of another partition) is not refused:
+ * what it holds is read (past its end reads as erased), nothing is ever written to it, and
+ * warning() says so; the board comes up on the slots it can read instead of stopping, and a
+ * restart loop under systemd, never tracking, is avoided.
  */
 class FileFlash : public hal::Flash {
 public:
@@ -26,6 +29,8 @@ public:
     /// \return false when the file could not be opened or created (see error()).
     bool isValid() const { return fd_ >= 0; }
     const std::string& error() const { return error_; }
+    /// \return why the partition is read only (a file of another size), or empty.
+    const std::string& warning() const { return warning_; }
 
     std::size_t size() const override { return size_; }
     std::size_t eraseBlockSize() const override { return eraseBlockSize_; }
@@ -41,7 +46,10 @@ private:
     std::size_t size_;
     std::size_t eraseBlockSize_;
     int fd_ = -1;
+    /// Bytes the file holds: size_, or fewer for a degraded (read-only) partition.
+    std::size_t fileSize_ = 0;
     std::string error_;
+    std::string warning_;
 };
 
 } // namespace edgetrack::linux_hal

@@ -30,6 +30,14 @@ LinuxBoard::LinuxBoard(const LinuxBoardConfig& config)
         error_ = std::string("cannot open a UDP socket: ") + std::strerror(udp_.errnoAtOpen());
 }
 
+std::string LinuxBoard::flashWarnings() const {
+    std::string text;
+    for (const FileFlash* flash : {&flash_, &rigFlash_})
+        if (!flash->warning().empty())
+            text += (text.empty() ? "" : "; ") + flash->warning();
+    return text;
+}
+
 bool LinuxBoard::devicesUp(std::string& why) {
     why.clear();
     const auto missing = [&](const std::string& what) { why += (why.empty() ? "" : "; ") + what; };
@@ -58,6 +66,8 @@ std::string LinuxBoard::report() const {
         << (button_.available() ? "held" : button_.errorText()) << "\n";
     out << "status LED " << config_.gpioChip << ":" << config_.statusLine << ": "
         << (statusLed_.available() ? "held" : statusLed_.errorText()) << "\n";
+    if (const std::string warnings = flashWarnings(); !warnings.empty())
+        out << "flash: " << warnings << "\n";
     if (socketCan_)
         out << "CAN " << config_.can.interface << (config_.can.fd ? " (FD)" : "") << ": "
             << hal::canStateName(socketCan_->state()) << ", " << socketCan_->queued()

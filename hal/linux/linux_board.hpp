@@ -64,6 +64,9 @@ public:
 
     /// \brief One line per device: what it is and how it is doing, for the status view.
     std::string report() const;
+    /// \return why a flash partition is read only (FileFlash::warning()), both joined; empty when
+    /// neither is.
+    std::string flashWarnings() const;
 
 private:
     class DisabledCanBus : public hal::CanBus {

@@ -98,6 +98,25 @@ TEST(FirmwareOnSimBoard, APowerCutAtEveryWriteOfAModelSaveLeavesTheOldOrTheNewMo
     }
 }
 
+TEST(FirmwareOnSimBoard, FallingBackToTheOlderSetSaysTheNewerIsDamaged) {
+    auto sim = makeBoard("two_cubes", 3);
+    {
+        Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+        firmware.start();
+        ASSERT_TRUE(firmware.replaceModels(truthSet(*sim))); // save 1, slot A
+        ASSERT_TRUE(firmware.replaceModels(truthSet(*sim))); // save 2, slot B
+    }
+    sim->flash.contents()[sim->flash.size() / 2 + 100] ^= 0x10; // one bit of slot B's payload
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    EXPECT_EQ(firmware.models().size(), 2u);
+    EXPECT_NE(firmware.flashReport().find("from flash slot A (save #1); slot B corrupt"),
+              std::string::npos)
+        << firmware.flashReport();
+    EXPECT_NE(firmware.flashReport().find("a later save may be lost"), std::string::npos)
+        << firmware.flashReport();
+}
+
 TEST(FirmwareOnSimBoard, BothSlotsCorruptStartsWithNoModelsAndSaysWhy) {
     auto sim = makeBoard("two_cubes", 3);
     {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "core/marker_set.hpp"
+#include "firmware_app/firmware/firmware_config.hpp"
 #include "firmware_app/firmware/model_store.hpp"
 #include "firmware_app/formats/model_file.hpp"
 #include "firmware_app/tools/model_command.hpp"
@@ -46,11 +47,11 @@ TEST(FileFlash, ANewPartitionIsErasedAndWritesClearBitsOnly) {
     EXPECT_FALSE(flash.write(8191, first)) << "past the end";
 }
 
-TEST(FileFlash, ContentsSurviveAReopenAndAWrongSizeIsRefused) {
+TEST(FileFlash, ContentsSurviveAReopenAndAWrongSizeIsReadButNeverWritten) {
     test::TempDir dir;
+    const std::array<std::uint8_t, 3> data{1, 2, 3};
     {
         linux_hal::FileFlash flash(dir.path() / "p.img", 8192, 4096);
-        const std::array<std::uint8_t, 3> data{1, 2, 3};
         ASSERT_TRUE(flash.write(5000, data));
     }
     linux_hal::FileFlash again(dir.path() / "p.img", 8192, 4096);
@@ -58,10 +59,21 @@ TEST(FileFlash, ContentsSurviveAReopenAndAWrongSizeIsRefused) {
     std::array<std::uint8_t, 3> read{};
     ASSERT_TRUE(again.read(5000, read));
     EXPECT_EQ(read, (std::array<std::uint8_t, 3>{1, 2, 3}));
+    // A file of another size stopped the board, which under Restart=on-failure restarted in a
+    // loop and never tracked although the slots were intact: it is now read as far as it goes
+    // (past its end as erased) and never written.
     linux_hal::FileFlash wrong(dir.path() / "p.img", 16384, 4096);
-    EXPECT_FALSE(wrong.isValid());
-    EXPECT_NE(wrong.error().find("holds 8192 bytes, the partition is 16384"), std::string::npos)
-        << wrong.error();
+    ASSERT_TRUE(wrong.isValid()) << wrong.error();
+    EXPECT_NE(wrong.warning().find("holds 8192 bytes, the partition is 16384"), std::string::npos)
+        << wrong.warning();
+    ASSERT_TRUE(wrong.read(5000, read));
+    EXPECT_EQ(read, (std::array<std::uint8_t, 3>{1, 2, 3}));
+    std::array<std::uint8_t, 4> beyond{};
+    ASSERT_TRUE(wrong.read(8190, beyond));
+    EXPECT_EQ(beyond, (std::array<std::uint8_t, 4>{0xFF, 0xFF, 0xFF, 0xFF}));
+    EXPECT_FALSE(wrong.write(0, data));
+    EXPECT_FALSE(wrong.erase(0, 4096));
+    EXPECT_EQ(std::filesystem::file_size(dir.path() / "p.img"), 8192u) << "left as it was";
     linux_hal::FileFlash missing(dir.path() / "no" / "such" / "p.img", 8192, 4096);
     EXPECT_FALSE(missing.isValid());
 }
@@ -144,6 +156,30 @@ TEST(ModelCommand, AMissingOrCorruptPartitionIsReported) {
     EXPECT_NE(s.error().message.find("no models on flash: slot A empty, slot B empty"),
               std::string::npos)
         << s.error().message;
+}
+
+TEST(ModelCommand, ImportRefusesMoreModelsThanTheBoardKeeps) {
+    // 100 models were saved while the board keeps 16: 84 showed only as a counter.
+    test::TempDir dir;
+    const fs::path models = dir.path() / "models";
+    fs::create_directories(models);
+    const std::vector<Vec3> layout = layoutOf(sim::makeCube50());
+    const std::size_t keeps = FirmwareConfig{}.maxModels;
+    for (std::uint32_t id = 0; id <= keeps; ++id)
+        ASSERT_TRUE(writeModelJson(modelPath(models, id), test::fullyConnectedModel(layout, id),
+                                   "cube " + std::to_string(id)));
+    ModelCommandOptions import;
+    import.action = "import";
+    import.models = models;
+    import.flash = dir.path() / "models.flash";
+    std::ostringstream out;
+    const Status s = runModelCommand(import, out);
+    ASSERT_FALSE(s);
+    EXPECT_NE(s.error().message.find(std::to_string(keeps + 1) +
+                                     " models; the board keeps at most " + std::to_string(keeps)),
+              std::string::npos)
+        << s.error().message;
+    EXPECT_FALSE(fs::exists(dir.path() / "models.flash")) << "nothing written";
 }
 
 } // namespace

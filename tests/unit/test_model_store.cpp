@@ -173,6 +173,11 @@ TEST(ModelStore, FallsBackToTheOlderSlotWhenTheNewerIsCorrupt) {
     ASSERT_TRUE(loaded) << loaded.error().message;
     EXPECT_TRUE(sameSet(loaded->models, first));
     EXPECT_EQ(loaded->slot, 0);
+    // The older set is right to load; saying nothing of the damaged newer one is not.
+    EXPECT_EQ(loaded->otherSlotProblem, "slot B corrupt (payload CRC mismatch)");
+    // With both slots good, nothing to say.
+    ASSERT_TRUE(store.save(modelSet(2, 13)));
+    EXPECT_EQ(store.load()->otherSlotProblem, "");
 }
 
 TEST(ModelStore, RefusesASetThatDoesNotFitAndKeepsTheOld) {
