@@ -1,6 +1,7 @@
 // Pinhole camera with OpenCV's five distortion coefficients: projection, undistortion, rays.
 #include "core/camera_model.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace edgetrack {
@@ -79,6 +80,35 @@ double CameraModel::pixelsPerRadian(const Vec3& direction_rig) const {
         return 0.0;
     return std::sqrt(intrinsics_.fx_px * intrinsics_.fy_px * det /
                      (cosTheta * cosTheta * cosTheta));
+}
+
+std::optional<double> CameraModel::foldInsideImage_px() const {
+    const CameraIntrinsics& in = intrinsics_;
+    double corner = 0.0; // the farthest corner, in distorted normalized coordinates
+    for (const double x : {-0.5, in.width_px - 0.5})
+        for (const double y : {-0.5, in.height_px - 0.5})
+            corner =
+                std::max(corner, std::hypot((x - in.cx_px) / in.fx_px, (y - in.cy_px) / in.fy_px));
+    const double k1 = in.distortion[0], k2 = in.distortion[1], k3 = in.distortion[4];
+    const auto distorted = [&](double r) {
+        const double r2 = r * r;
+        return r * (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3)));
+    };
+    // Walk the undistorted radius out until the distorted one passes the corner (a lens maps
+    // well under 90 degrees onto an image; 20 in normalized units is 87 degrees).
+    constexpr int kSteps = 4000;
+    constexpr double kFarthest = 20.0;
+    double previous = 0.0;
+    for (int i = 1; i <= kSteps; ++i) {
+        const double r = kFarthest * static_cast<double>(i) / kSteps;
+        const double now = distorted(r);
+        if (now >= corner)
+            return std::nullopt;
+        if (!(now > previous))
+            return previous * std::sqrt(in.fx_px * in.fy_px);
+        previous = now;
+    }
+    return std::nullopt;
 }
 
 Vec2 CameraModel::pixelFromNormalized(const Vec2& normalized) const {

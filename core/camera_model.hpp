@@ -82,6 +82,15 @@ public:
      */
     double pixelsPerRadian(const Vec3& direction_rig) const;
 
+    /**
+     * \brief Where the radial distortion folds the image back inside it: the distance (px, from
+     * the principal point) at which the distorted radius r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops
+     * growing before it reaches the farthest corner. Past a fold two directions image to one
+     * pixel and no undistortion is right; a lens model fitted outside the image can do this
+     * (k1 = -5), a lens cannot. Nothing when the mapping grows out to every corner.
+     */
+    std::optional<double> foldInsideImage_px() const;
+
     /// \brief Map normalized (distorted or not) coordinates to pixels.
     Vec2 pixelFromNormalized(const Vec2& normalized) const;
 

@@ -47,6 +47,13 @@ Result<CameraModel> readCamera(std::string_view name, const toml::table& table, 
                  "not a proper rotation matrix (row-major, orthonormal, det +1)");
     if (error)
         return *error;
+    if (const std::optional<double> fold = model.foldInsideImage_px())
+        keys.require(false, "distortion",
+                     "folds the image back " + std::to_string(static_cast<int>(*fold)) +
+                         " px from the principal point, inside the image (the radius stops "
+                         "growing there): no lens does that, check k1, k2, k3");
+    if (error)
+        return *error;
     return model;
 }
 

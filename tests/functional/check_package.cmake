@@ -23,7 +23,14 @@ foreach(path ./usr/bin/edgetrack ./etc/edgetrack/edgetrack.toml
 endforeach()
 execute_process(COMMAND ${DPKG_DEB} --field ${debs} Architecture Depends
                 OUTPUT_VARIABLE fields)
-if(NOT fields MATCHES "Architecture: ${EXPECT_ARCH}" OR NOT fields MATCHES "libsystemd0")
+# Every library the program links must be in Depends, or it does not start on a fresh system
+# ("libgpiod.so.2: cannot open shared object file").
+foreach(package libsystemd0 libgpiod2 libcamera0.0.3 libgoogle-glog0v6 libcholmod3)
+    if(NOT fields MATCHES "${package}")
+        message(FATAL_ERROR "Depends lacks ${package}:\n${fields}")
+    endif()
+endforeach()
+if(NOT fields MATCHES "Architecture: ${EXPECT_ARCH}")
     message(FATAL_ERROR "unexpected control fields:\n${fields}")
 endif()
 execute_process(COMMAND ${DPKG_DEB} --ctrl-tarfile ${debs} COMMAND tar -t OUTPUT_VARIABLE control)
