@@ -1,9 +1,12 @@
 // Frame-by-frame reading of recordings and C3D files, with blob detection and stereo on demand.
 #include "firmware_app/tools/frame_source.hpp"
 
+#include <algorithm>
 #include <array>
+#include <filesystem>
 #include <map>
 #include <set>
+#include <string>
 #include <vector>
 
 #include "core/marker_pipeline.hpp"
@@ -156,6 +159,29 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
         return frames.error();
 
     std::map<std::int64_t, std::vector<recording::BlobRow>> inputBlobs;
+    if (level == Level::Images) {
+        // Images of a frame frames.csv does not list would be skipped in silence, as rows of
+        // blobs.csv for such a frame are not (below): both are refused.
+        std::set<std::int64_t> known;
+        for (const recording::FrameRow& f : *frames)
+            known.insert(f.frame);
+        std::error_code ec;
+        for (const std::filesystem::directory_entry& entry :
+             std::filesystem::directory_iterator(input / "images", ec)) {
+            const std::string name = entry.path().filename().string();
+            // NNNNNN_C.pgm (INTERFACES §1); other files are not images of the recording.
+            const bool isImage = name.size() == 12 && name.substr(6, 1) == "_" &&
+                                 (name[7] == '0' || name[7] == '1') && name.substr(8) == ".pgm" &&
+                                 std::all_of(name.begin(), name.begin() + 6,
+                                             [](char c) { return c >= '0' && c <= '9'; });
+            if (isImage && !known.contains(std::stoll(name.substr(0, 6))))
+                return Error{(input / "images" / name).string() + ": frame " +
+                             std::to_string(std::stoll(name.substr(0, 6))) +
+                             " is not in frames.csv"};
+        }
+        if (ec)
+            return Error{(input / "images").string() + ": " + ec.message()};
+    }
     if (level == Level::Blobs) {
         Result<std::vector<recording::BlobRow>> rows = recording::readBlobs(input / "blobs.csv");
         if (!rows)
