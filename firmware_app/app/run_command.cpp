@@ -166,6 +166,8 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     stopRequested = false;
     std::signal(SIGINT, onStopSignal);
     std::signal(SIGTERM, onStopSignal);
+    // A closed terminal (SIGHUP) stops the board as Ctrl-C does: with its final report.
+    std::signal(SIGHUP, onStopSignal);
     std::signal(SIGUSR1, onReportSignal);
 
     StdinButton stdinButton(typedButton);
@@ -241,6 +243,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
     firmware.stop();
     std::signal(SIGINT, SIG_DFL);
     std::signal(SIGTERM, SIG_DFL);
+    std::signal(SIGHUP, SIG_DFL);
     std::signal(SIGUSR1, SIG_DFL);
     if (terminal && statusPeriod > 0)
         err << "\n";
