@@ -67,6 +67,10 @@ Result<CsvTable> parseCsv(std::string_view text, std::string_view name,
     while (required < columns.size() && !columns[required].optional)
         ++required;
 
+    // A UTF-8 byte order mark (spreadsheets write one) is no part of the header, as JSON readers
+    // take it too.
+    if (text.starts_with("\xEF\xBB\xBF"))
+        text.remove_prefix(3);
     CsvTable table;
     std::size_t lineNumber = 0;
     bool headerSeen = false;

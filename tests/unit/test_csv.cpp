@@ -48,6 +48,19 @@ TEST(Csv, ParsesWithAndWithoutOptionalColumn) {
     EXPECT_EQ(without->rows[0].line, 2u);
 }
 
+TEST(Csv, AByteOrderMarkBeforeTheHeaderIsTakenAsJsonReadersTakeIt) {
+    const auto table = parseCsv("\xEF\xBB\xBF"
+                                "frame,camera,u,v\n3,0,1.5,2\n",
+                                "x", kBlobColumns);
+    ASSERT_TRUE(table) << table.error().message;
+    ASSERT_EQ(table->rows.size(), 1u);
+    EXPECT_EQ(table->rows[0].integer(0), 3);
+    EXPECT_FALSE(parseCsv("frame,\xEF\xBB\xBF"
+                          "camera,u,v\n",
+                          "x", kBlobColumns))
+        << "only before the header";
+}
+
 TEST(Csv, HeaderOnlyIsAnEmptyTable) {
     const auto r = parseCsv("frame,camera,u,v\n", "x", kBlobColumns);
     ASSERT_TRUE(r);
@@ -74,6 +87,16 @@ TEST(Csv, MissingColumn) {
 TEST(Csv, ExtraColumn) {
     EXPECT_EQ(errorOf("frame,camera,u,v\n0,0,1,2,9\n"),
               "rec/blobs.csv:2: expected 4 fields, found 5");
+}
+
+TEST(Csv, AnErrorQuotingBinaryBytesIsOnePrintableLine) {
+    // A binary file given as CSV: its bytes were echoed to the terminal, escape sequences and all.
+    const std::string error = errorOf("frame,camera,u,v\n0,0,\x1b[2J\x01\xff"
+                                      "\xc3\xa9,2\n");
+    EXPECT_NE(error.find("\\x1b[2J\\x01\\xff\xc3\xa9"), std::string::npos) << error;
+    for (const char c : error)
+        EXPECT_FALSE(static_cast<unsigned char>(c) < 0x20 || c == 0x7f) << error;
+    EXPECT_EQ(Error{"a\nb"}.message, "a\\x0ab") << "one line";
 }
 
 TEST(Csv, TextInANumberField) {
