@@ -65,16 +65,35 @@ hal::CanSendResult CanLogBus::send(const hal::CanFrame& frame) {
     std::array<char, 192> line{};
     const std::size_t length =
         formatCandumpLine(frame, clock_.now() + clock_.utcOffset(), interface_, line);
-    if (length == 0 || std::fwrite(line.data(), 1, length, file_) != length)
+    if (length == 0) {
+        ++lost_;
+        return result;
+    }
+    // Flushed here, before stdio would on its own, so that each flush's fate is known.
+    if (buffered_ + length > fileBuffer_.size())
+        flush();
+    if (std::fwrite(line.data(), 1, length, file_) != length) {
         ++writeFailures_;
-    else
-        ++logged_;
+        ++lost_;
+        return result;
+    }
+    buffered_ += length;
+    ++pending_;
     return result;
 }
 
 void CanLogBus::flush() {
-    if (file_ != nullptr && std::fflush(file_) != 0)
+    if (file_ == nullptr)
+        return;
+    if (std::fflush(file_) == 0) {
+        logged_ += pending_;
+    } else {
         ++writeFailures_;
+        lost_ += pending_;
+        std::clearerr(file_);
+    }
+    pending_ = 0;
+    buffered_ = 0;
 }
 
 } // namespace edgetrack::app

@@ -50,7 +50,10 @@ public:
     hal::CanState state() const override { return bus_.state(); }
     hal::CanCounters counters() const override { return bus_.counters(); }
 
+    /// \return frames known to be in the file: written out by a flush that succeeded.
     std::uint64_t framesLogged() const { return logged_; }
+    /// \return frames lost: their flush failed (a full disk), or a line could not be formatted.
+    std::uint64_t framesLost() const { return lost_; }
     std::uint64_t writeFailures() const { return writeFailures_; }
     /// \brief Push what is buffered to the file.
     void flush();
@@ -63,7 +66,12 @@ private:
     std::FILE* file_ = nullptr;
     std::vector<char> fileBuffer_;
     std::uint64_t logged_ = 0;
+    std::uint64_t lost_ = 0;
     std::uint64_t writeFailures_ = 0;
+    /// Lines and bytes in the buffer since the last flush: a buffered write always succeeds, so a
+    /// frame counts as logged only once a flush has put it in the file.
+    std::uint64_t pending_ = 0;
+    std::size_t buffered_ = 0;
 };
 
 } // namespace edgetrack::app

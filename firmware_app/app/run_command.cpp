@@ -252,8 +252,9 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         canLog->flush();
         out << "edgetrack run: " << canLog->framesLogged() << " CAN frames logged to "
             << options.canLog.string() << " (candump -L)";
-        if (canLog->writeFailures() > 0)
-            out << ", " << canLog->writeFailures() << " writes failed";
+        if (canLog->framesLost() > 0)
+            out << ", " << canLog->framesLost() << " lost (" << canLog->writeFailures()
+                << " writes failed)";
         out << "\n";
     }
     out << runBoard.report();

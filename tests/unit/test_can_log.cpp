@@ -54,6 +54,26 @@ TEST(CanLog, WritesClassicExtendedAndFdFramesAsCandumpDoes) {
     EXPECT_EQ(formatCandumpLine(classic, 0, "can0", shortBuffer), 0u) << "nothing partial";
 }
 
+TEST(CanLogBus, FramesWhoseWriteFailedAreCountedLostNotLogged) {
+    // On a full disk the log said "1791 CAN frames logged, 2 writes failed" of an empty file:
+    // buffered writes succeed, and only the flush fails. /dev/full fails every write.
+    if (!std::filesystem::exists("/dev/full"))
+        GTEST_SKIP() << "no /dev/full";
+    sim::SimClock clock(false);
+    sim::SimCanBus bus(clock, 4096);
+    CanLogBus logged(bus, clock, "vcan0", "/dev/full");
+    ASSERT_TRUE(logged.isValid()) << logged.error();
+    hal::CanFrame frame;
+    frame.id = 0x300;
+    frame.length = 8;
+    for (int i = 0; i < 3000; ++i)
+        logged.send(frame);
+    logged.flush();
+    EXPECT_EQ(logged.framesLogged(), 0u);
+    EXPECT_EQ(logged.framesLost(), 3000u);
+    EXPECT_GE(logged.writeFailures(), 2u) << "the buffer filled more than once";
+}
+
 TEST(CanLogBus, LogsTheFramesTheBusTookAndPassesEverythingOn) {
     sim::SimClock clock(false);
     sim::SimCanBus bus(clock, 2);
@@ -74,7 +94,10 @@ TEST(CanLogBus, LogsTheFramesTheBusTookAndPassesEverythingOn) {
         EXPECT_EQ(logged.send(invalid), hal::CanSendResult::Invalid);
         bus.setDown(true);
         EXPECT_EQ(logged.send(frame), hal::CanSendResult::Down);
+        EXPECT_EQ(logged.framesLogged(), 0u) << "buffered: not in the file yet";
+        logged.flush();
         EXPECT_EQ(logged.framesLogged(), 3u);
+        EXPECT_EQ(logged.framesLost(), 0u);
         EXPECT_EQ(logged.writeFailures(), 0u);
         EXPECT_EQ(logged.counters().sent, bus.counters().sent);
     }
