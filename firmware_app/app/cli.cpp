@@ -32,6 +32,7 @@ struct RunOptions {
     std::string can;
     std::string canLog;
     std::string models;
+    std::vector<std::string> faults;
 };
 
 struct SimOptions {
@@ -103,6 +104,9 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
     runCommand->add_option("--can-log", run.canLog,
                            "Log the CAN frames sent to FILE (candump -L format); enables CAN");
     runCommand->add_option("--models", run.models, "Load models from this directory");
+    runCommand->add_option("--fault", run.faults,
+                           "Simulated board only: camera-stall@T+D, can-bus-off@T or "
+                           "button-bounce@T (seconds from the start; repeatable)");
 
     SimOptions sim;
     CLI::App* simCommand = app.add_subcommand("sim", "Write a recording of a simulated scene");
@@ -215,6 +219,7 @@ int runCommandLine(int argc, const char* const* argv, std::ostream& out, std::os
         options.can = run.can;
         options.canLog = run.canLog;
         options.models = run.models;
+        options.faults = run.faults;
         return runFirmwareCommand(options, out, err);
     }
     if (simCommand->parsed()) {

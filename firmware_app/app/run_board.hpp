@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include "core/result.hpp"
 #include "core/stereo_rig.hpp"
@@ -48,14 +50,33 @@ public:
     virtual bool needsProcessRestart() const { return false; }
     /// \brief The backend's own counters for the final report (may be empty).
     virtual std::string report() const { return {}; }
+    /// \brief Start the faults scheduled for this moment (run --fault; the simulated board's).
+    virtual void applyFaults() {}
 };
+
+/**
+ * \brief A fault of the simulated board's devices, for an integrator to test a receiver's handling
+ * of it: `camera-stall@T+D` (the cameras deliver nothing from T s for D s), `can-bus-off@T` (the
+ * controller goes bus-off at T s and restarts 1 s later), `button-bounce@T` (a press at T s with
+ * five bounces at each end).
+ */
+struct SimFault {
+    enum class Kind { CameraStall, CanBusOff, ButtonBounce };
+    Kind kind = Kind::CameraStall;
+    double at_s = 0.0;
+    double duration_s = 0.0;
+};
+
+/// \brief \a text as a SimFault; a one-line error naming what is wrong.
+Result<SimFault> parseSimFault(std::string_view text);
 
 /// \return whether the simulated board knows scene \a name (`edgetrack sim --list`).
 bool isSimScene(const std::string& name);
 
 /// \brief The simulated board rendering \a scene (seed \a seed), in real time, with the host's UDP.
 Result<std::unique_ptr<RunBoard>> makeSimRunBoard(const FirmwareConfig& config,
-                                                  const std::string& scene, std::uint64_t seed);
+                                                  const std::string& scene, std::uint64_t seed,
+                                                  std::vector<SimFault> faults = {});
 
 /// \brief The real board: libcamera, libgpiod, SocketCAN, the flash file, [cameras] rig.
 Result<std::unique_ptr<RunBoard>> makeLinuxRunBoard(const FirmwareConfig& config);

@@ -102,9 +102,22 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         err << "edgetrack run: unknown scene '" << scene << "' (edgetrack sim --list)\n";
         return 2;
     }
-    Result<std::unique_ptr<RunBoard>> made = options.board == "linux"
-                                                 ? makeLinuxRunBoard(config)
-                                                 : makeSimRunBoard(config, scene, options.seed);
+    std::vector<SimFault> faults;
+    for (const std::string& text : options.faults) {
+        Result<SimFault> fault = parseSimFault(text);
+        if (!fault) {
+            err << "edgetrack run: " << fault.error().message << "\n";
+            return 2;
+        }
+        faults.push_back(*fault);
+    }
+    if (!faults.empty() && options.board == "linux") {
+        err << "edgetrack run: --fault is for the simulated board\n";
+        return 2;
+    }
+    Result<std::unique_ptr<RunBoard>> made =
+        options.board == "linux" ? makeLinuxRunBoard(config)
+                                 : makeSimRunBoard(config, scene, options.seed, std::move(faults));
     if (!made) {
         err << "edgetrack run: " << made.error().message << "\n";
         return 1;
@@ -199,6 +212,7 @@ int runFirmwareCommand(const RunCommandOptions& options, std::ostream& out, std:
         case StdinButton::Press::None:
             break;
         }
+        runBoard.applyFaults();
         firmware.step();
         const hal::Nanoseconds now = board.clock.now();
         if (runBoard.needsProcessRestart()) {

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <ostream>
 #include <string>
+#include <vector>
 
 namespace edgetrack::app {
 
@@ -25,6 +26,8 @@ struct RunCommandOptions {
     std::uint64_t seed = 1;
     /// Read button presses from standard input (Enter: short press, "long": long press).
     bool buttonFromStdin = true;
+    /// Faults of the simulated board's devices (SimFault's forms), for testing receivers.
+    std::vector<std::string> faults;
 };
 
 /**
