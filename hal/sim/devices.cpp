@@ -26,6 +26,10 @@ SimClock::SimClock(bool realTime)
                           : kNoon20260101;
 }
 
+Nanoseconds SimClock::now() const {
+    return realTime_ ? std::max(now_, hostNow() - hostStart_) : now_;
+}
+
 void SimClock::advanceTo(Nanoseconds t) {
     if (t <= now_)
         return;

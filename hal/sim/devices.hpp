@@ -26,14 +26,15 @@ using hal::Nanoseconds;
  * \brief The simulated board's clock.
  *
  * Virtual by default: sleepUntil() jumps, so tests run as fast as the host allows and are
- * repeatable. In real-time mode it also sleeps on the host, so `edgetrack run` paces at camera
- * rate.
+ * repeatable. In real-time mode it is the host's clock since construction: sleepUntil() sleeps
+ * on the host, so `edgetrack run` paces at camera rate, and a host that falls behind does not
+ * hold time back (the cameras drop the frames nobody took, and latencies are real).
  */
 class SimClock : public hal::Clock {
 public:
     explicit SimClock(bool realTime = false);
 
-    Nanoseconds now() const override { return now_; }
+    Nanoseconds now() const override;
     void sleepUntil(Nanoseconds deadline) override;
     /// Virtual time 0 is 2026-01-01 12:00:00 UTC, so runs repeat exactly; in real-time mode it is
     /// the host's wall clock at construction.

@@ -78,8 +78,25 @@ hal::AcquireStatus SimCameraPair::acquire(hal::StereoFrame& frame, Nanoseconds t
             clock_.advanceTo(deadline);
             return hal::AcquireStatus::Timeout;
         }
+        // A host that fell behind (real time) finds exposures read out while it was busy: the
+        // sensor filled as many as it had free buffers for, oldest first, and dropped the rest.
+        if (const Nanoseconds now = clock_.now(); now > ready && index >= skipTo_) {
+            std::uint64_t free = 0;
+            for (const bool held : held_)
+                free += held ? 0U : 1U;
+            std::uint64_t readOut = 1;
+            while (exposureStart(index + readOut) + exposure_ + kSyncSkew + kReadout <= now)
+                ++readOut;
+            if (readOut > free && free > 0) {
+                counters_.droppedNoBuffer += readOut - free;
+                skipFrom_ = index + free;
+                skipTo_ = index + readOut;
+            }
+        }
         clock_.advanceTo(ready);
         ++nextIndex_;
+        if (index >= skipFrom_ && index < skipTo_)
+            continue; // already counted as dropped
 
         if (dropPartnerEvery_ > 0 && (index + 1) % dropPartnerEvery_ == 0) {
             ++counters_.droppedUnpaired;

@@ -70,6 +70,9 @@ private:
     Observation observation_;
     hal::CameraPairCounters counters_{};
     std::uint64_t nextIndex_ = 0;
+    /// Exposures read out while the host was behind with no buffer free for them: dropped.
+    std::uint64_t skipFrom_ = 0;
+    std::uint64_t skipTo_ = 0;
     std::uint64_t dropPartnerEvery_ = 0;
     int spuriousBurst_ = 0;
     bool started_ = false;

@@ -1,5 +1,7 @@
 // Tests of the simulated camera pair: timing, buffer re-use, drops, LED strobe, faults.
+#include <chrono>
 #include <set>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -35,6 +37,38 @@ TEST(SimCameraPair, DeliversPairedFramesAtTheFrameRate) {
         previousMid = frame.camera[0].midExposure();
         board.cameras.release(frame);
     }
+}
+
+TEST(SimCameraPair, InRealTimeAHostThatFellBehindGetsOldFramesAndTheRestAreDropped) {
+    // Under host overload the board fell behind wall time and dropped nothing, and a frame that
+    // arrived 100 ms late said 3 ms. A real sensor fills the buffers it has and drops the rest.
+    SimBoardOptions options;
+    options.realTime = true;
+    options.cameraBufferPairs = 4;
+    SimBoard board(*makeScene("slow_cube", 1), 1, options);
+    board.ledRing.setContinuous(true);
+    ASSERT_TRUE(board.cameras.start());
+    hal::StereoFrame frame;
+    ASSERT_EQ(board.cameras.acquire(frame, hal::kNanosecondsPerSecond), hal::AcquireStatus::Frame);
+    board.cameras.release(frame);
+    const std::uint64_t first = frame.number;
+    std::this_thread::sleep_for(std::chrono::milliseconds(200)); // about 20 exposures
+    ASSERT_EQ(board.cameras.acquire(frame, hal::kNanosecondsPerSecond), hal::AcquireStatus::Frame);
+    EXPECT_EQ(frame.number, first + 1) << "the oldest frame a buffer held";
+    EXPECT_GE(board.clock.now() - frame.midExposure(), 150 * hal::kNanosecondsPerMillisecond)
+        << "its age is real";
+    board.cameras.release(frame);
+    std::uint64_t last = frame.number;
+    for (int i = 0; i < 3; ++i) {
+        ASSERT_EQ(board.cameras.acquire(frame, hal::kNanosecondsPerSecond),
+                  hal::AcquireStatus::Frame);
+        board.cameras.release(frame);
+        last = frame.number;
+    }
+    EXPECT_EQ(last, first + 4) << "four buffers' worth delivered";
+    ASSERT_EQ(board.cameras.acquire(frame, hal::kNanosecondsPerSecond), hal::AcquireStatus::Frame);
+    EXPECT_GE(frame.number, first + 18) << "then the frames read out with no buffer are gone";
+    EXPECT_GE(board.cameras.counters().droppedNoBuffer, 14u);
 }
 
 TEST(SimCameraPair, ReusesItsBuffersAndDropsWhenAllAreHeld) {
