@@ -42,6 +42,7 @@ public:
 
     /// \brief Move virtual time forward to \a t (never backward).
     void advanceTo(Nanoseconds t);
+    bool isRealTime() const { return realTime_; }
 
 private:
     Nanoseconds now_ = 0;
