@@ -307,6 +307,8 @@ private:
     };
     Traced traced_{};
     std::size_t tracedEdges_ = 0;
+    /// splitMask_ still holds traced_'s pixels (splitIntoDiscs reuses it for flags).
+    bool tracedMask_ = false;
     /// splitOnLines holds a disc's radius to its expected size with this weight, against 1 for each
     /// outline point: about the (0.2 px) scatter of the points over a (0.1 px) trust in the size.
     static constexpr double kRadiusPrior = 4.0;

@@ -75,7 +75,8 @@ struct StereoMatcher::Prepared {
             rectified[c] = std::make_unique<Vec2[]>(maxBlobs);
             pixel[c] = std::make_unique<Vec2[]>(maxBlobs);
             radius[c] = std::make_unique<double[]>(maxBlobs);
-            angularRadius[c] = std::make_unique<double[]>(maxBlobs);
+            logAngularRadius[c] = std::make_unique<double[]>(maxBlobs);
+            rimVariance[c] = std::make_unique<double[]>(maxBlobs);
             rays[c] = std::make_unique<Ray[]>(maxBlobs);
             valid[c] = std::make_unique<bool[]>(maxBlobs);
             neighbours[c] = std::make_unique<Neighbourhood[]>(maxBlobs);
@@ -93,9 +94,11 @@ struct StereoMatcher::Prepared {
     std::unique_ptr<Vec2[]> pixel[2];
     /// Radius of a disc of the blob's area (px).
     std::unique_ptr<double[]> radius[2];
-    /// Angular radius (rad) of the sphere whose image that is: radius over pixelsPerRadian();
-    /// 0 for a blob without an area.
-    std::unique_ptr<double[]> angularRadius[2];
+    /// Log of the angular radius (rad) of the sphere whose image that is (radius over
+    /// pixelsPerRadian()), and the variance its rim adds, (sizeRimSigma_px / radius)^2; a blob
+    /// without an area has a negative variance (no size).
+    std::unique_ptr<double[]> logAngularRadius[2];
+    std::unique_ptr<double[]> rimVariance[2];
     std::unique_ptr<Ray[]> rays[2];
     std::unique_ptr<bool[]> valid[2];
     /// Offsets of the other blobs of the same camera inside region R (rectified px).
@@ -175,7 +178,8 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
         for (std::size_t i = 0; i < p.count[c]; ++i) {
             p.pixel[c][i] = blobs[c][i].centre_px;
             p.radius[c][i] = blobs[c][i].discRadius_px();
-            p.angularRadius[c][i] = 0.0;
+            p.logAngularRadius[c][i] = 0.0;
+            p.rimVariance[c][i] = -1.0;
             p.valid[c][i] = false;
             const std::optional<Ray> ray = rig_.camera(c).ray(blobs[c][i].centre_px);
             if (!ray) {
@@ -190,9 +194,14 @@ void StereoMatcher::prepare(std::span<const Blob> blobs0, std::span<const Blob> 
             p.rays[c][i] = *ray;
             p.rectified[c][i] = *rectified;
             p.valid[c][i] = true;
-            const double pixelsPerRadian = rig_.camera(c).pixelsPerRadian(ray->direction_rig);
-            if (p.radius[c][i] > 0.0 && pixelsPerRadian > 0.0)
-                p.angularRadius[c][i] = p.radius[c][i] / pixelsPerRadian;
+            if (config_.sizeSigma > 0.0 && p.radius[c][i] > 0.0) {
+                const double pixelsPerRadian = rig_.camera(c).pixelsPerRadian(ray->direction_rig);
+                if (pixelsPerRadian > 0.0) {
+                    p.logAngularRadius[c][i] = std::log(p.radius[c][i] / pixelsPerRadian);
+                    const double rim = config_.sizeRimSigma_px / p.radius[c][i];
+                    p.rimVariance[c][i] = rim * rim;
+                }
+            }
         }
         std::size_t valid = 0;
         for (std::size_t i = 0; i < p.count[c]; ++i)
@@ -329,23 +338,25 @@ double StereoMatcher::neighbourhoodDistance(int i, int j) const {
     return meanClosestDistance(smaller, larger);
 }
 
-double StereoMatcher::sizeWeight(int i, int j) const {
+double StereoMatcher::sizeExponent(int i, int j) const {
     const Prepared& p = *prepared_;
-    const double angular0 = p.angularRadius[0][idx(i)], angular1 = p.angularRadius[1][idx(j)];
-    if (config_.sizeSigma <= 0.0 || angular0 <= 0.0 || angular1 <= 0.0)
-        return 1.0;
+    const double rim0 = p.rimVariance[0][idx(i)], rim1 = p.rimVariance[1][idx(j)];
+    if (rim0 < 0.0 || rim1 < 0.0)
+        return 0.0;
     // The point's ranges from both centres, from its rectified coordinates: depth f B / d along
     // the rectified axis, and each camera's rectified ray length per unit depth.
     const Vec2& a = p.rectified[0][idx(i)];
     const Vec2& b = p.rectified[1][idx(j)];
-    const double f = rig_.rectifiedFocal_px();
-    const double rangeRatio = std::sqrt((a.x() * a.x() + a.y() * a.y() + f * f) /
-                                        (b.x() * b.x() + b.y() * b.y() + f * f));
-    const double logRatio = std::log(angular0 / angular1 * rangeRatio);
-    const double rim0 = config_.sizeRimSigma_px / p.radius[0][idx(i)];
-    const double rim1 = config_.sizeRimSigma_px / p.radius[1][idx(j)];
-    const double variance = config_.sizeSigma * config_.sizeSigma + rim0 * rim0 + rim1 * rim1;
-    return std::exp(-logRatio * logRatio / (2.0 * variance));
+    const double f2 = rig_.rectifiedFocal_px() * rig_.rectifiedFocal_px();
+    // Half the log of x, the ratio of the squared ray lengths, by atanh's series: ln x =
+    // 2 (y + y^3 / 3 + ...) with y = (x - 1) / (x + 1); x lies within a factor of two of 1 over
+    // any lens's field, where the terms left out are under 0.001 (a pair's log is weighed at 0.05).
+    const double r0 = a.squaredNorm() + f2, r1 = b.squaredNorm() + f2;
+    const double y = (r0 - r1) / (r0 + r1);
+    const double logRatio =
+        p.logAngularRadius[0][idx(i)] - p.logAngularRadius[1][idx(j)] + y * (1.0 + y * y / 3.0);
+    const double variance = config_.sizeSigma * config_.sizeSigma + rim0 + rim1;
+    return -logRatio * logRatio / (2.0 * variance);
 }
 
 double StereoMatcher::proximity(int i, int j) const {
@@ -355,9 +366,9 @@ double StereoMatcher::proximity(int i, int j) const {
     // the two blobs' sizes.
     const double dy = prepared_->rectified[0][idx(i)].y() - prepared_->rectified[1][idx(j)].y();
     const double d = neighbourhoodDistance(i, j);
-    return sizeWeight(i, j) *
-           std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px) -
-                    d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px));
+    return std::exp(-dy * dy / (2.0 * config_.sigmaEpipolar_px * config_.sigmaEpipolar_px) -
+                    d * d / (2.0 * config_.sigmaSimilarity_px * config_.sigmaSimilarity_px) +
+                    sizeExponent(i, j));
 }
 
 void StereoMatcher::correspond(BoundedVectorView<IndexPair>& pairs) {

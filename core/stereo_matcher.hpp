@@ -185,8 +185,9 @@ private:
     /// Triangulate two rays into \a marker's position, ray gap and reprojection, with the checks.
     bool checkedMarker(const Ray& ray0, const Ray& ray1, const Vec2& pixel0, const Vec2& pixel1,
                        StereoMarker& marker);
-    /// The size weight of sizeSigma for prepared blobs \a i and \a j (1 where a size is unknown).
-    double sizeWeight(int i, int j) const;
+    /// The exponent of the size weight of sizeSigma for prepared blobs \a i and \a j (0 where a
+    /// size is unknown).
+    double sizeExponent(int i, int j) const;
 
     StereoRig rig_;
     StereoConfig config_;
