@@ -349,8 +349,9 @@ double StereoMatcher::sizeExponent(int i, int j) const {
     const Vec2& b = p.rectified[1][idx(j)];
     const double f2 = rig_.rectifiedFocal_px() * rig_.rectifiedFocal_px();
     // Half the log of x, the ratio of the squared ray lengths, by atanh's series: ln x =
-    // 2 (y + y^3 / 3 + ...) with y = (x - 1) / (x + 1); x lies within a factor of two of 1 over
-    // any lens's field, where the terms left out are under 0.001 (a pair's log is weighed at 0.05).
+    // 2 (y + y^3 / 3 + ...) with y = (x - 1) / (x + 1). For the two rays of one point x stays
+    // within 2.5 of 1 even on a wide converging rig (the rays differ by the disparity alone),
+    // where the terms left out are under 0.003 (a pair's log is weighed at 0.05).
     const double r0 = a.squaredNorm() + f2, r1 = b.squaredNorm() + f2;
     const double y = (r0 - r1) / (r0 + r1);
     const double logRatio =
