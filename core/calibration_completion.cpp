@@ -37,6 +37,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                                        std::span<MarkerModel> out) {
     counters_ = {};
     precision_.clear();
+    mostSeenTogether_.clear();
     untiedPieces_.clear();
     bodies_.clear();
     nextBodyId_ = 0;
@@ -152,6 +153,7 @@ std::size_t CalibrationCompletion::run(const SessionBuffer& session,
                 model.edges.push_back(
                     {a, b, (model.markers_model_mm[a] - model.markers_model_mm[b]).norm()});
         precision_.push_back(body->precision);
+        mostSeenTogether_.push_back(body->mostSeenTogether);
         ++count;
     }
     computeSmin(out.first(count), config_.smin);

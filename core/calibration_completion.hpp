@@ -215,6 +215,9 @@ public:
     const CompletionCounters& counters() const { return counters_; }
     /// \brief Per model written by the last run() (by id): how closely the session fixed it.
     std::span<const LayoutPrecision> precision() const { return precision_; }
+    /// \return for each model of the last complete(), the most of its markers one frame of the
+    /// session showed: a model whose S_min is above it will seldom or never be found.
+    std::span<const std::size_t> mostSeenTogether() const { return mostSeenTogether_; }
     /// \brief The models written by the last run() that are pieces of one object (see
     /// UntiedPieces).
     std::span<const UntiedPieces> untiedPieces() const { return untiedPieces_; }
@@ -419,6 +422,7 @@ private:
     bool valid_ = false;
     CompletionCounters counters_{};
     std::vector<LayoutPrecision> precision_;
+    std::vector<std::size_t> mostSeenTogether_;
     std::vector<UntiedPieces> untiedPieces_;
     std::vector<Body> bodies_;
     /// The alive bodies' models as trackAll() last tracked them (bodies_ order).

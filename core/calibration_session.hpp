@@ -59,6 +59,9 @@ public:
     const CompletionCounters& completionCounters() const { return completion_.counters(); }
     /// \brief Per model of the last complete() (by id): how closely the session fixed its layout.
     std::span<const LayoutPrecision> completionPrecision() const { return completion_.precision(); }
+    std::span<const std::size_t> completionMostSeenTogether() const {
+        return completion_.mostSeenTogether();
+    }
     /// \brief Models of the last complete() (by id) that are untied pieces of one object.
     std::span<const UntiedPieces> completionUntiedPieces() const {
         return completion_.untiedPieces();

@@ -285,7 +285,9 @@ inline bool seenFromNear(std::span<const Vec3> directions, const Vec3& view, dou
 
 /// \brief The cone of directions a marker can be seen from, from those it was seen from: its axis
 /// the mean of \a directions (unit vectors, body frame), its half-angle the widest of them from
-/// the axis widened by \a margin_rad, at most pi (seen from everywhere: a sphere on a post).
+/// the axis widened by \a margin_rad. A marker seen only from within a hemisphere sits on a
+/// surface, which hides it from behind: its cone stays within that hemisphere (pi / 2). One seen
+/// from wider has at most pi (a sphere on a post, seen from everywhere).
 /// A marker seen from no direction has a negative half-angle: seen with nothing.
 struct ViewCone {
     Vec3 axis = Vec3::UnitZ();
@@ -307,17 +309,20 @@ inline ViewCone viewCone(std::span<const Vec3> directions, double margin_rad) {
     double widest = 0.0;
     for (const Vec3& d : directions)
         widest = std::max(widest, std::acos(std::clamp(d.dot(cone.axis), -1.0, 1.0)));
-    cone.halfAngle_rad = std::min(std::numbers::pi, widest + margin_rad);
+    const double limit =
+        widest < 0.5 * std::numbers::pi ? 0.5 * std::numbers::pi : std::numbers::pi;
+    cone.halfAngle_rad = std::min(limit, widest + margin_rad);
     return cone;
 }
 
-/// \brief Whether one viewing direction lies in both cones: two markers that can be seen
-/// together, though a session may never have shown them so.
+/// \brief Whether one viewing direction lies inside both cones: two markers that can be seen
+/// together, though a session may never have shown them so. Cones that only touch (markers on
+/// opposite faces, each seen from its hemisphere) do not count.
 inline bool coVisible(const ViewCone& a, const ViewCone& b) {
     if (a.halfAngle_rad < 0.0 || b.halfAngle_rad < 0.0)
         return false;
     const double apart = std::acos(std::clamp(a.axis.dot(b.axis), -1.0, 1.0));
-    return apart <= a.halfAngle_rad + b.halfAngle_rad;
+    return apart < a.halfAngle_rad + b.halfAngle_rad - 1e-9;
 }
 
 /// The point of \a points_mm nearest to \a there_mm within \a radius_mm (of equally near ones,

@@ -104,17 +104,28 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             << " written to " << options.out.string() << "\n";
     summary << "  settings: " << options.settings.source << "\n";
     const std::span<const LayoutPrecision> precision = session.completionPrecision();
+    const std::span<const std::size_t> mostSeen = session.completionMostSeenTogether();
     for (std::size_t i = 0; i < merged.models.size(); ++i) {
         const MarkerModel& model = merged.models[i].model;
         summary << "  body_" << model.id << ".json: " << model.markers_model_mm.size()
                 << " markers, " << model.edges.size() << " edges, s_min " << model.sMin;
-        if (const int learnt = merged.learntIndex[i];
-            learnt >= 0 && static_cast<std::size_t>(learnt) < precision.size())
+        const int learnt = merged.learntIndex[i];
+        if (learnt >= 0 && static_cast<std::size_t>(learnt) < precision.size())
             summary << "; " << precisionText(precision[static_cast<std::size_t>(learnt)]);
         if (model.sameShapeAs >= 0)
             summary << " (same layout as body_" << model.sameShapeAs
                     << ": told apart only by tracking them continuously)";
         summary << "\n";
+        // The tracker finds a body only with S_min of its markers in view: a layout so regular
+        // that more are needed than the session ever showed at once is seldom or never found.
+        if (learnt >= 0 && static_cast<std::size_t>(learnt) < mostSeen.size() &&
+            mostSeen[static_cast<std::size_t>(learnt)] > 0 &&
+            model.sMin > mostSeen[static_cast<std::size_t>(learnt)])
+            summary << "  WARNING body_" << model.id << ".json needs " << model.sMin
+                    << " of its markers in view to be found, and the session showed at most "
+                    << mostSeen[static_cast<std::size_t>(learnt)]
+                    << " at once: it will seldom or never be found. Make its layout less "
+                       "regular (move a marker or two off their pattern) and calibrate again\n";
     }
     // Pieces of one object that the session could not tie: only the user can mend that.
     auto fileOfLearnt = [&](std::size_t learnt) -> const MarkerModel* {

@@ -193,6 +193,24 @@ TEST(ViewCones, MarkersThatCanBeSeenTogetherThoughNoFrameShowedThem) {
     EXPECT_NEAR(top.halfAngle_rad, (50.0 + 15.0) * std::numbers::pi / 180.0, 1e-9);
     EXPECT_TRUE(coVisible(top, side));
     EXPECT_FALSE(coVisible(top, bottom));
+    // Seen up to 80 degrees off their normals (widened past 90), markers on opposite faces still
+    // cannot be seen together: a surface hides its markers from behind.
+    const auto grazing = [&](const Vec3& normal) {
+        std::vector<Vec3> seen{normal};
+        const Vec3 across = normal.unitOrthogonal();
+        const double tilt = 80.0 * std::numbers::pi / 180.0;
+        for (int k = 0; k < 8; ++k) {
+            const double turn = 2.0 * std::numbers::pi * k / 8.0;
+            seen.push_back(std::cos(tilt) * normal +
+                           std::sin(tilt) *
+                               (std::cos(turn) * across + std::sin(turn) * normal.cross(across)));
+        }
+        return seen;
+    };
+    EXPECT_FALSE(coVisible(viewCone(grazing(Vec3::UnitZ()), margin),
+                           viewCone(grazing(-Vec3::UnitZ()), margin)));
+    EXPECT_TRUE(coVisible(viewCone(grazing(Vec3::UnitZ()), margin),
+                          viewCone(grazing(Vec3::UnitX()), margin)));
     const std::vector<Vec3> allRound{Vec3::UnitX(), -Vec3::UnitX(), Vec3::UnitY(), -Vec3::UnitY()};
     const ViewCone post = viewCone(allRound, margin);
     EXPECT_TRUE(coVisible(post, bottom));
