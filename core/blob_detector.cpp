@@ -585,7 +585,6 @@ std::size_t BlobDetector::traceOutline(int left, int top, int right, int bottom,
         bottom >= height_ - 1 || seedX < left || seedX > right || seedY < top || seedY > bottom)
         return 0;
     traced_ = {pixels, left, top, right, bottom, seedX, seedY};
-    tracedMask_ = true;
     const int gw = w + 2, gh = h + 2;
     const auto cell = [gw](int gx, int gy) { return static_cast<std::size_t>(gy * gw + gx); };
     const auto level = [&](int gx, int gy) {
@@ -648,7 +647,7 @@ bool BlobDetector::splitOrEllipse(const Moments& m, const std::uint8_t* pixels, 
         ellipse.rms <= kSplitFitRms_px && ellipse.elongation <= config_.maxMarkerElongation;
     const std::size_t before = candidates_.size();
     const BlobCounters countersBefore = counters_;
-    if (splitIntoDiscs(m, pixels, stride_bytes, order, minParts)) {
+    if (splitIntoDiscs(m, edges, order, minParts)) {
         double splitRms = 0.0;
         for (std::size_t k = before; k < candidates_.size(); ++k)
             splitRms = std::max(splitRms, static_cast<double>(candidates_[k].blob.fitRms_px));
@@ -666,16 +665,10 @@ bool BlobDetector::splitOrEllipse(const Moments& m, const std::uint8_t* pixels, 
     return true;
 }
 
-bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
-                                  std::uint32_t order, std::size_t minParts) {
+bool BlobDetector::splitIntoDiscs(const Moments& m, std::size_t edges, std::uint32_t order,
+                                  std::size_t minParts) {
     // The blob on a grid of its bounding box with a frame of one pixel: a cut disc at the image's
-    // border is no disc to fit.
-    // splitOrEllipse traced this blob just before: its outline and mask stand.
-    const Traced key{pixels, m.left, m.top, m.right, m.bottom, m.seedX, m.seedY};
-    const std::size_t edges = key == traced_ && tracedMask_
-                                  ? tracedEdges_
-                                  : traceOutline(m.left, m.top, m.right, m.bottom, m.seedX, m.seedY,
-                                                 pixels, stride_bytes);
+    // border is no disc to fit (no outline).
     if (edges == 0)
         return false;
     const int w = m.right - m.left + 1, h = m.bottom - m.top + 1;
@@ -747,7 +740,6 @@ bool BlobDetector::splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, 
     std::array<Circle, kMaxSplitParts> circle{};
     std::size_t count = 0;
     std::uint8_t* use = mask; // the mask is no longer needed: reused as per-point flags
-    tracedMask_ = false;
 
     // A circle rests on its own outline points when they cover at least half of it (their unit
     // vectors from its centre sum to less than 0.7 of their number: 0.64 for a half circle, 0.83

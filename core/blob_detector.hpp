@@ -215,9 +215,11 @@ private:
                         std::uint32_t order, std::size_t minParts);
     /// Split a blob that is not round into the discs it is made of (up to kMaxSplitParts), as
     /// candidates (those that can be centred with confidence), or centre it as one disc cut by an
-    /// edge; false when neither, or when fewer than \a minParts discs can be centred.
-    bool splitIntoDiscs(const Moments& m, const std::uint8_t* pixels, int stride_bytes,
-                        std::uint32_t order, std::size_t minParts = 1);
+    /// edge; false when neither, or when fewer than \a minParts discs can be centred. Its outline
+    /// is the one traceOutline() traced last (\a edges points in splitEdge_, pixels in
+    /// splitMask_).
+    bool splitIntoDiscs(const Moments& m, std::size_t edges, std::uint32_t order,
+                        std::size_t minParts);
     /// The outline of the component through pixel (\a seedX, \a seedY) inside the bounds
     /// \a left..\a bottom: its pixels into splitMask_ and its outline points into splitEdge_, on a
     /// grid of the bounds with a frame of one pixel. \return the number of outline points; 0 when
@@ -307,8 +309,6 @@ private:
     };
     Traced traced_{};
     std::size_t tracedEdges_ = 0;
-    /// splitMask_ still holds traced_'s pixels (splitIntoDiscs reuses it for flags).
-    bool tracedMask_ = false;
     /// splitOnLines holds a disc's radius to its expected size with this weight, against 1 for each
     /// outline point: about the (0.2 px) scatter of the points over a (0.1 px) trust in the size.
     static constexpr double kRadiusPrior = 4.0;
