@@ -372,6 +372,20 @@ fs::path imagePath(const fs::path& recording, std::int64_t frame, int camera) {
     return recording / "images" / name.data();
 }
 
+std::optional<std::int64_t> imageFrameOf(std::string_view fileName) {
+    // As imagePath() writes them: six digits, '_', the camera, ".pgm".
+    if (fileName.size() != 12 || fileName[6] != '_' || (fileName[7] != '0' && fileName[7] != '1') ||
+        fileName.substr(8) != ".pgm")
+        return std::nullopt;
+    std::int64_t frame = 0;
+    for (const char c : fileName.substr(0, 6)) {
+        if (c < '0' || c > '9')
+            return std::nullopt;
+        frame = frame * 10 + (c - '0');
+    }
+    return frame;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Directory level
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/result.hpp"
@@ -104,6 +105,10 @@ Status writePgm(const std::filesystem::path& path, const Image8& image);
 /// \brief REC/images/NNNNNN_C.pgm
 std::filesystem::path imagePath(const std::filesystem::path& recording, std::int64_t frame,
                                 int camera);
+
+/// \return the frame whose image \a fileName (a name in images/) is, NNNNNN_C.pgm with C 0 or 1;
+/// nothing for any other name.
+std::optional<std::int64_t> imageFrameOf(std::string_view fileName);
 
 /// \brief What a recording directory holds.
 struct Inventory {

@@ -1,7 +1,6 @@
 // Frame-by-frame reading of recordings and C3D files, with blob detection and stereo on demand.
 #include "firmware_app/tools/frame_source.hpp"
 
-#include <algorithm>
 #include <array>
 #include <filesystem>
 #include <map>
@@ -168,15 +167,11 @@ reconstructFrames(const fs::path& input, Level level, const MarkerPipelineConfig
         std::error_code ec;
         for (const std::filesystem::directory_entry& entry :
              std::filesystem::directory_iterator(input / "images", ec)) {
-            const std::string name = entry.path().filename().string();
-            // NNNNNN_C.pgm (INTERFACES §1); other files are not images of the recording.
-            const bool isImage = name.size() == 12 && name.substr(6, 1) == "_" &&
-                                 (name[7] == '0' || name[7] == '1') && name.substr(8) == ".pgm" &&
-                                 std::all_of(name.begin(), name.begin() + 6,
-                                             [](char c) { return c >= '0' && c <= '9'; });
-            if (isImage && !known.contains(std::stoll(name.substr(0, 6))))
-                return Error{(input / "images" / name).string() + ": frame " +
-                             std::to_string(std::stoll(name.substr(0, 6))) +
+            // Other files than NNNNNN_C.pgm (INTERFACES §1) are not images of the recording.
+            const std::optional<std::int64_t> frame =
+                recording::imageFrameOf(entry.path().filename().string());
+            if (frame && !known.contains(*frame))
+                return Error{entry.path().string() + ": frame " + std::to_string(*frame) +
                              " is not in frames.csv"};
         }
         if (ec)

@@ -193,3 +193,11 @@ TEST(Recording, LevelNames) {
     EXPECT_EQ(parseLevel("points"), Level::Points);
     EXPECT_FALSE(parseLevel("pixels"));
 }
+
+TEST(Recording, ImageNamesReadBackToTheirFrame) {
+    EXPECT_EQ(imageFrameOf(imagePath("rec", 123, 1).filename().string()), 123);
+    EXPECT_EQ(imageFrameOf("000000_0.pgm"), 0);
+    for (const char* other : {"000123_2.pgm", "00012a_0.pgm", "000123_0.png", "123_0.pgm",
+                              "0000123_0.pgm", "thumbs.db"})
+        EXPECT_FALSE(imageFrameOf(other)) << other;
+}
