@@ -68,7 +68,7 @@ Status runModelCommand(const ModelCommandOptions& options, std::ostream& out) {
     Result<BoardSettings> board = boardSettings(options);
     if (!board)
         return board.error();
-    const FlashSettings* settings = &board->flash;
+    const FlashSettings& settings = board->flash;
     const bool fromDirectory = !options.models.empty();
 
     if (options.action == "import") {
@@ -83,24 +83,23 @@ Status runModelCommand(const ModelCommandOptions& options, std::ostream& out) {
             return Error{options.models.string() + ": " + std::to_string(models->size()) +
                          " models; the board keeps at most " + std::to_string(board->maxModels) +
                          " ([tracking] max_models): nothing imported"};
-        linux_hal::FileFlash flash(settings->device, settings->size_bytes,
-                                   settings->eraseBlock_bytes);
+        linux_hal::FileFlash flash(settings.device, settings.size_bytes, settings.eraseBlock_bytes);
         if (!flash.isValid())
             return Error{flash.error()};
         if (!flash.warning().empty())
             return Error{flash.warning()};
         ModelStore store(flash, MarkerSet::kCapacity);
         if (Status s = store.save(*models); !s)
-            return Error{settings->device.string() + ": " + s.error().message};
+            return Error{settings.device.string() + ": " + s.error().message};
         out << "edgetrack model import: " << models->size()
             << (models->size() == 1 ? " model" : " models") << " saved to "
-            << settings->device.string() << "\n";
+            << settings.device.string() << "\n";
         return Ok{};
     }
 
     Result<std::vector<NamedModel>> models =
         fromDirectory ? readModelDirectory(options.models, MarkerSet::kCapacity)
-                      : loadFromFlash(*settings);
+                      : loadFromFlash(settings);
     if (!models)
         return models.error();
 
