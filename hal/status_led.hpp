@@ -7,6 +7,9 @@ namespace edgetrack::hal {
 class StatusLed {
 public:
     virtual ~StatusLed() = default;
+    /// \brief Called every frame with the level the LED should show. A backend writes only
+    /// changes, and one that could not drive its LED (a GPIO line held by another process)
+    /// tries again here and then shows the level it is given.
     virtual void set(bool on) = 0;
 };
 

@@ -69,11 +69,7 @@ void StatusLedDriver::update(LedPattern statePattern, hal::Nanoseconds now, hal:
         shown_ = pattern;
         shownSince_ = now;
     }
-    const bool on = ledLevel(pattern, now - shownSince_);
-    if (on != on_) {
-        on_ = on;
-        led.set(on);
-    }
+    led.set(ledLevel(pattern, now - shownSince_));
 }
 
 } // namespace edgetrack::app

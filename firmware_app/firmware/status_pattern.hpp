@@ -42,13 +42,14 @@ public:
     /// \brief Show \a pattern once from \a now (e.g. Confirm), over the state's own.
     void showOnce(LedPattern pattern, hal::Nanoseconds now);
     /// \brief Set \a led as it should be at \a now, showing \a statePattern unless a one-shot
-    /// pattern is running; switches it only when its level changes.
+    /// pattern is running. The level is passed at every update, not only when it changes: a
+    /// backend writes only changes, and one whose line was taken back after being busy must
+    /// learn the level even while the pattern holds it steady.
     void update(LedPattern statePattern, hal::Nanoseconds now, hal::StatusLed& led);
 
 private:
     LedPattern shown_ = LedPattern::Heartbeat;
     hal::Nanoseconds shownSince_ = 0;
-    bool on_ = false;
     LedPattern oneShot_ = LedPattern::Confirm;
     hal::Nanoseconds oneShotUntil_ = 0;
 };
