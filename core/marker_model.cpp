@@ -273,10 +273,11 @@ std::size_t largestCongruence(const MarkerModel& a, const Adjacency& adjA, const
 
 namespace {
 
-/// Whether a rigid transform puts at least \a needed of a's markers onto b's, tried from a's
-/// widest co-visible triangles: copies and parts share almost every triangle, so a few wide ones
-/// find the transform; a full congruence search (computeSmin) is far dearer.
-bool mapsOnto(const MarkerModel& a, const MarkerModel& b, double needed, double tol) {
+/// A rigid transform (T_b_from_a) that puts at least \a needed of a's markers onto b's, tried
+/// from a's widest co-visible triangles: copies and parts share almost every triangle, so a few
+/// wide ones find the transform; a full congruence search (computeSmin) is far dearer.
+std::optional<RigidTransform> mapOnto(const MarkerModel& a, const MarkerModel& b, double needed,
+                                      double tol) {
     Adjacency adjA, adjB;
     buildAdjacency(a, adjA);
     buildAdjacency(b, adjB);
@@ -307,40 +308,48 @@ bool mapsOnto(const MarkerModel& a, const MarkerModel& b, double needed, double 
                     *smallest = t;
             });
         });
+    std::optional<RigidTransform> found;
     for (const Triangle& t : widest) {
-        const bool found = forEachCongruentTriangle(
-            pa[t.i], pa[t.j], pa[t.k], pb.span(), tol, EveryPair{adjB},
-            [&](std::size_t x, std::size_t y, std::size_t z) {
-                const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
-                const Vec3 to[3] = {pb[x], pb[y], pb[z]};
-                const std::optional<RigidFit> fit = fitRigid(from, to);
-                return fit && static_cast<double>(
-                                  countCongruent(a, b, fit->transform, tol * tol)) >= needed;
-            });
+        forEachCongruentTriangle(pa[t.i], pa[t.j], pa[t.k], pb.span(), tol, EveryPair{adjB},
+                                 [&](std::size_t x, std::size_t y, std::size_t z) {
+                                     const Vec3 from[3] = {pa[t.i], pa[t.j], pa[t.k]};
+                                     const Vec3 to[3] = {pb[x], pb[y], pb[z]};
+                                     const std::optional<RigidFit> fit = fitRigid(from, to);
+                                     if (!fit || static_cast<double>(countCongruent(
+                                                     a, b, fit->transform, tol * tol)) < needed)
+                                         return false;
+                                     found = fit->transform;
+                                     return true;
+                                 });
         if (found)
-            return true;
+            return found;
     }
-    return false;
+    return std::nullopt;
 }
 
 } // namespace
 
-bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config) {
+std::optional<RigidTransform> sameShapeTransform(const MarkerModel& a, const MarkerModel& b,
+                                                 const SminConfig& config) {
     const std::size_t smaller = std::min(a.markers_model_mm.size(), b.markers_model_mm.size());
     const std::size_t larger = std::max(a.markers_model_mm.size(), b.markers_model_mm.size());
     if (smaller < 3 ||
         static_cast<double>(smaller) < config.sameShapeShare * static_cast<double>(larger))
-        return false;
-    return mapsOnto(a, b, config.sameShapeShare * static_cast<double>(smaller),
-                    config.tolerance_mm);
+        return std::nullopt;
+    return mapOnto(a, b, config.sameShapeShare * static_cast<double>(smaller), config.tolerance_mm);
+}
+
+bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config) {
+    return sameShapeTransform(a, b, config).has_value();
 }
 
 bool isPartOf(const MarkerModel& part, const MarkerModel& whole, const SminConfig& config) {
     const std::size_t size = part.markers_model_mm.size();
     if (size < 3 || size > whole.markers_model_mm.size())
         return false;
-    return mapsOnto(part, whole, config.sameShapeShare * static_cast<double>(size),
-                    config.tolerance_mm);
+    return mapOnto(part, whole, config.sameShapeShare * static_cast<double>(size),
+                   config.tolerance_mm)
+        .has_value();
 }
 
 SminWorkspace::SminWorkspace(std::size_t maxMarkers) {

@@ -143,6 +143,14 @@ void computeSmin(std::span<MarkerModel> models, const SminConfig& config);
 bool sameShape(const MarkerModel& a, const MarkerModel& b, const SminConfig& config);
 
 /**
+ * \brief sameShape's transform: T_b_from_a, which puts that share of the smaller layout's markers
+ * onto the other's; nothing when the two are not copies of one layout. For a layout with
+ * symmetries (a cube) it is one of the equally good ones.
+ */
+std::optional<RigidTransform> sameShapeTransform(const MarkerModel& a, const MarkerModel& b,
+                                                 const SminConfig& config);
+
+/**
  * \brief Whether \a part is a piece of \a whole's layout: a rigid transform puts at least
  * config.sameShapeShare of part's markers onto markers of whole (within config.tolerance_mm).
  */

@@ -144,6 +144,15 @@ void ModelTracker::reset() {
     }
 }
 
+void ModelTracker::continueBody(std::size_t body, const ModelTracker& from, std::size_t fromBody) {
+    if (body >= bodies_.size() || fromBody >= from.bodies_.size())
+        return;
+    const std::uint32_t id = bodies_[body].modelId;
+    bodies_[body] = from.bodies_[fromBody];
+    bodies_[body].modelId = id;
+    history_[body] = from.history_[fromBody];
+}
+
 void ModelTracker::update(double time_s, std::span<const Vec3> points_rig_mm, bool searchLost) {
     if (!valid_)
         return;

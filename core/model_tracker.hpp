@@ -151,6 +151,15 @@ public:
     /// \brief Forget every body's history (as after a gap in the data).
     void reset();
 
+    /**
+     * \brief Carry body \a fromBody of \a from over to this tracker's body \a body: its last
+     * poses (for prediction and for telling copies apart by position), residual record and the
+     * time it was last found. For a model set replaced by another in which that body's model
+     * keeps its frame (a recalibrated layout registered onto the old one): it is then followed on
+     * at once, and of two identical objects each keeps its id.
+     */
+    void continueBody(std::size_t body, const ModelTracker& from, std::size_t fromBody);
+
     /// \return one entry per model, in model order, as of the last update().
     std::span<const TrackedBody> bodies() const { return bodies_; }
 

@@ -28,11 +28,14 @@ CalibrationFinisher::~CalibrationFinisher() {
 }
 
 void CalibrationFinisher::start(CalibrationSession& session, std::vector<NamedModel> known,
-                                std::size_t maxModels, const SminConfig& shape, ModelStore& store) {
+                                std::vector<KnownSighting> sightings,
+                                const ModelTrackingConfig& tracking, std::size_t maxModels,
+                                const SminConfig& shape, ModelStore& store) {
     (void)wait();
     done_.store(false, std::memory_order_relaxed);
     result_ = FinishedCalibration{};
-    worker_ = std::thread([this, &session, known = std::move(known), maxModels, shape, &store] {
+    worker_ = std::thread([this, &session, known = std::move(known),
+                           sightings = std::move(sightings), tracking, maxModels, shape, &store] {
         lowerThisThreadsPriority();
         const auto begin = std::chrono::steady_clock::now();
         FinishedCalibration result;
@@ -44,8 +47,15 @@ void CalibrationFinisher::start(CalibrationSession& session, std::vector<NamedMo
         result.precision.assign(precision.begin(), precision.end());
         const std::span<const UntiedPieces> untied = session.completionUntiedPieces();
         result.untiedPieces.assign(untied.begin(), untied.end());
+        const std::span<const std::size_t> mostSeen = session.completionMostSeenTogether();
+        result.mostSeenTogether.assign(mostSeen.begin(), mostSeen.end());
         if (!learnt.empty()) {
-            result.merged = mergeLearntModels(known, learnt, maxModels, shape);
+            std::vector<MarkerModel> knownLayouts;
+            for (const NamedModel& m : known)
+                knownLayouts.push_back(copyOf(m.model));
+            const std::vector<SameObject> same = findKnownInSession(
+                session.frames(), knownLayouts, sightings, learnt, tracking, shape.tolerance_mm);
+            result.merged = mergeLearntModels(known, learnt, same, maxModels, shape);
             result.saved = store.save(result.merged.models);
         }
         result.took_s =

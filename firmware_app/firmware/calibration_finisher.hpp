@@ -34,6 +34,8 @@ struct FinishedCalibration {
     std::vector<LayoutPrecision> precision;
     /// Learnt models (by learnt index) that are pieces of one object the session did not tie.
     std::vector<UntiedPieces> untiedPieces;
+    /// Per learnt model: the most of its markers one frame of the session showed.
+    std::vector<std::size_t> mostSeenTogether;
     /// Whether the new set reached flash (only tried when learnt > 0).
     Status saved = Ok{};
     /// Wall time the worker took (s), completion, merge and save.
@@ -59,12 +61,14 @@ public:
     ~CalibrationFinisher();
 
     /**
-     * \brief Complete \a session, merge the result into \a known and save the set to \a store,
-     * in a worker thread.
+     * \brief Complete \a session, tie its models to the \a known bodies it showed (\a sightings,
+     * findKnownInSession with \a tracking), merge them into \a known and save the set to
+     * \a store, in a worker thread.
      * \param maxModels, shape as mergeLearntModels() takes them.
      */
-    void start(CalibrationSession& session, std::vector<NamedModel> known, std::size_t maxModels,
-               const SminConfig& shape, ModelStore& store);
+    void start(CalibrationSession& session, std::vector<NamedModel> known,
+               std::vector<KnownSighting> sightings, const ModelTrackingConfig& tracking,
+               std::size_t maxModels, const SminConfig& shape, ModelStore& store);
 
     /// \return true from start() until the result has been taken.
     bool busy() const { return worker_.joinable(); }

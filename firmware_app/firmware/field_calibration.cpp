@@ -33,6 +33,7 @@ const char* endReason(SessionStep step) {
 FieldCalibration::FieldCalibration(const FirmwareConfig& config, const StereoRig& rig)
     : settings_(config.session)
     , maxModels_(config.maxModels)
+    , tracking_(config.tracking)
     , online_(config.calibration)
     , session_(config.calibration, completionFor(config, &rig), sessionFrames(config),
                sessionFrames(config) * config.session.bufferPointsPerFrame)
@@ -80,9 +81,11 @@ std::size_t FieldCalibration::learntObjects() {
     return learnt().objects;
 }
 
-void FieldCalibration::finish(std::vector<NamedModel> known, ModelStore& store) {
+void FieldCalibration::finish(std::vector<NamedModel> known, std::vector<KnownSighting> sightings,
+                              ModelStore& store) {
     open_ = false;
-    finisher_.start(session_, std::move(known), maxModels_, online_.smin, store);
+    finisher_.start(session_, std::move(known), std::move(sightings), tracking_, maxModels_,
+                    online_.smin, store);
 }
 
 } // namespace edgetrack::app

@@ -61,10 +61,12 @@ public:
     double opened_s() const { return opened_s_; }
 
     /**
-     * \brief Close the session and complete its models, merge them into \a known and save the
+     * \brief Close the session and complete its models, merge them into \a known (the bodies
+     * the board found during the session, \a sightings, keep their ids and frames) and save the
      * set to \a store, in a worker thread of lower priority.
      */
-    void finish(std::vector<NamedModel> known, ModelStore& store);
+    void finish(std::vector<NamedModel> known, std::vector<KnownSighting> sightings,
+                ModelStore& store);
     /// \return true while the worker has not handed its result over.
     bool finishing() const { return finisher_.busy(); }
     std::optional<FinishedCalibration> poll() { return finisher_.poll(); }
@@ -80,6 +82,7 @@ private:
 
     CalibrationSessionSettings settings_;
     std::size_t maxModels_;
+    ModelTrackingConfig tracking_;
     CalibrationConfig online_;
     CalibrationSession session_;
     CalibrationFinisher finisher_;

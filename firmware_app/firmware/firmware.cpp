@@ -141,7 +141,10 @@ Firmware::~Firmware() {
 }
 
 void Firmware::stop() {
-    // A finishing calibration's models are saved before the board stops: never lost.
+    // A session still open is abandoned (counted so), a finishing one's models are saved before
+    // the board stops: never lost.
+    if (state_ == FirmwareState::Calibrating || state_ == FirmwareState::RigCalibrating)
+        changeState(FirmwareState::Tracking);
     waitForFinishing();
     board_.cameras.stop();
     board_.ledRing.setContinuous(false);
@@ -150,12 +153,23 @@ void Firmware::stop() {
 }
 
 void Firmware::setModels(std::vector<NamedModel> models) {
+    // A body whose id stays keeps its frame (a recalibration registers the new layout onto the
+    // old one): the new tracker follows it on from where the old one had it, so two identical
+    // objects keep their ids.
+    std::optional<ModelTracker> previous = std::move(tracker_);
+    const std::vector<NamedModel> before = std::move(models_);
     models_ = std::move(models);
     std::vector<MarkerModel> layouts;
     layouts.reserve(models_.size());
     for (const NamedModel& m : models_)
         layouts.push_back(copyOf(m.model));
     tracker_.emplace(layouts, config_.tracking);
+    if (previous)
+        for (std::size_t i = 0; i < models_.size(); ++i)
+            for (std::size_t j = 0; j < before.size(); ++j)
+                if (before[j].model.id == models_[i].model.id)
+                    tracker_->continueBody(i, *previous, j);
+    sightings_.assign(models_.size(), std::nullopt);
     outputs_.resetFilters();
 }
 
@@ -202,9 +216,10 @@ void Firmware::changeState(FirmwareState next) {
     const bool trackingResumes = next == FirmwareState::Tracking ||
                                  next == FirmwareState::Finishing ||
                                  next == FirmwareState::RigFinishing;
+    // The known bodies are tracked through a calibration session (findKnownInSession), so they
+    // are followed on after it with their identities.
     if (trackingResumes &&
-        (state_ == FirmwareState::Calibrating || state_ == FirmwareState::Degraded ||
-         state_ == FirmwareState::RigCalibrating))
+        (state_ == FirmwareState::Degraded || state_ == FirmwareState::RigCalibrating))
         tracker_->reset();
     // Where the tracked markers were expected holds only for the tracking frame that follows.
     if (next != state_)
@@ -260,6 +275,7 @@ void Firmware::handleButton(hal::Nanoseconds now) {
 }
 
 void Firmware::startCalibration() {
+    std::fill(sightings_.begin(), sightings_.end(), std::nullopt);
     calibration_.open(hal::toSeconds(board_.clock.now()));
     changeState(FirmwareState::Calibrating);
     ++counters_.calibrationsStarted;
@@ -280,7 +296,11 @@ void Firmware::finishCalibration(const char* why) {
     }
     // Completion and the save run beside the frame loop; the models from before are tracked
     // until the new ones are in use.
-    calibration_.finish(copyOf(models_), store_);
+    std::vector<KnownSighting> sightings;
+    for (const std::optional<KnownSighting>& s : sightings_)
+        if (s)
+            sightings.push_back(*s);
+    calibration_.finish(copyOf(models_), std::move(sightings), store_);
     changeState(FirmwareState::Finishing);
     note(finishingEvent_ + ": finishing " + std::to_string(objects) + " objects");
 }
@@ -348,6 +368,20 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
                 " shared markers, never tied): calibrate it again, turning it through the side "
                 "between them";
     }
+    for (std::size_t i = 0; i < merge.models.size(); ++i) {
+        const int learnt = merge.learntIndex[i];
+        if (learnt < 0 || static_cast<std::size_t>(learnt) >= finished.mostSeenTogether.size())
+            continue;
+        const MarkerModel& model = merge.models[i].model;
+        if (const std::optional<std::string> why = seldomFindable(
+                model, finished.mostSeenTogether[static_cast<std::size_t>(learnt)])) {
+            ++counters_.modelsSeldomFindable;
+            text += "; body " + std::to_string(model.id) + " " + *why;
+        }
+    }
+    for (const std::uint32_t id : merge.kept)
+        text += "; body " + std::to_string(id) +
+                " kept as it was (its new layout would be found less often)";
     if (merge.fragments > 0)
         text += "; " + std::to_string(merge.fragments) + " fragment" +
                 (merge.fragments == 1 ? "" : "s") + " of a larger body dropped";
@@ -648,6 +682,13 @@ void Firmware::process(const hal::StereoFrame& frame, hal::Nanoseconds acquiredA
     last_.number = frame.number;
     last_.time_s = hal::toSeconds(frame.midExposure());
     if (state_ == FirmwareState::Calibrating) {
+        // The known bodies are followed beside the session: where each was last found tells
+        // which learnt model it is (its id and frame stay), and keeps identical objects apart.
+        tracker_->update(last_.time_s, markers_.points_rig_mm());
+        const std::span<const TrackedBody> tracked = tracker_->bodies();
+        for (std::size_t b = 0; b < tracked.size() && b < sightings_.size(); ++b)
+            if (tracked[b].found())
+                sightings_[b] = KnownSighting{b, last_.time_s, tracked[b].T_rig_from_model};
         const SessionStep step = calibration_.update(last_.time_s, markers_.points_rig_mm());
         if (step == SessionStep::BufferFull)
             ++counters_.sessionFramesRefused;
@@ -826,6 +867,7 @@ std::string Firmware::statusReport() const {
     row("models refused (max_models)", c.modelOverflow);
     row("learnt fragments dropped", c.fragmentsDropped);
     row("learnt pieces of one object untied", c.untiedPieces);
+    row("learnt models seldom findable (S_min)", c.modelsSeldomFindable);
     row("model deletions", c.modelDeletions);
     row("rig calibrations started", c.rigCalibrationsStarted);
     row("rig calibrations adopted", c.rigCalibrationsAdopted);

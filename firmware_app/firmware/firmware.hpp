@@ -105,6 +105,9 @@ struct FirmwareCounters {
     std::uint64_t fragmentsDropped = 0;
     /// Pairs of learnt models that are pieces of one object nothing in the session tied.
     std::uint64_t untiedPieces = 0;
+    /// Learnt models that need more markers in view to be found (S_min) than their session
+    /// ever showed at once: seldom or never found.
+    std::uint64_t modelsSeldomFindable = 0;
     std::uint64_t modelDeletions = 0;
     std::uint64_t flashErrors = 0;
     std::uint64_t rigCalibrationsStarted = 0;
@@ -265,6 +268,9 @@ private:
     ModelStore store_;
     std::optional<ModelTracker> tracker_;
     FieldCalibration calibration_;
+    /// Per model: where the body was last found while the calibration session ran (sized with
+    /// the models, so filling it allocates nothing).
+    std::vector<std::optional<KnownSighting>> sightings_;
     /// Finishing: "calibration ended by ... after ... s", and a long press waiting for the end.
     std::string finishingEvent_;
     bool deletePending_ = false;

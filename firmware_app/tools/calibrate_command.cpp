@@ -90,7 +90,7 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
         progress << "\n";
     // As on the board when it has no models yet: the same fragments dropped, ids and S_min.
     const MergedModels merged =
-        mergeLearntModels({}, session.complete(), config.maxModels, config.calibration.smin);
+        mergeLearntModels({}, session.complete(), {}, config.maxModels, config.calibration.smin);
     const std::size_t count = merged.models.size();
     for (const NamedModel& named : merged.models)
         if (Status s =
@@ -116,16 +116,10 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
             summary << " (same layout as body_" << model.sameShapeAs
                     << ": told apart only by tracking them continuously)";
         summary << "\n";
-        // The tracker finds a body only with S_min of its markers in view: a layout so regular
-        // that more are needed than the session ever showed at once is seldom or never found.
-        if (learnt >= 0 && static_cast<std::size_t>(learnt) < mostSeen.size() &&
-            mostSeen[static_cast<std::size_t>(learnt)] > 0 &&
-            model.sMin > mostSeen[static_cast<std::size_t>(learnt)])
-            summary << "  WARNING body_" << model.id << ".json needs " << model.sMin
-                    << " of its markers in view to be found, and the session showed at most "
-                    << mostSeen[static_cast<std::size_t>(learnt)]
-                    << " at once: it will seldom or never be found. Make its layout less "
-                       "regular (move a marker or two off their pattern) and calibrate again\n";
+        if (learnt >= 0 && static_cast<std::size_t>(learnt) < mostSeen.size())
+            if (const std::optional<std::string> why =
+                    seldomFindable(model, mostSeen[static_cast<std::size_t>(learnt)]))
+                summary << "  WARNING body_" << model.id << ".json " << *why << "\n";
     }
     // Pieces of one object that the session could not tie: only the user can mend that.
     auto fileOfLearnt = [&](std::size_t learnt) -> const MarkerModel* {

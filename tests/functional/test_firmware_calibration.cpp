@@ -350,5 +350,105 @@ TEST(FirmwareOnSimBoard, ALongPressDeletesAllModelsWithAConfirmationPattern) {
         << restarted.flashReport();
 }
 
+// A recalibration with the objects' models on the board: three identical cubes, each known. Only
+// continuity tells them apart, and a host has fixed things to their frames: each body must stay
+// on its own cube, in its own frame, before the session, while it finishes, and after.
+TEST(FirmwareOnSimBoard, ARecalibrationKeepsEachKnownCubeOnItsCubeInItsFrameThroughout) {
+    auto sim = makeBoard("three_cubes", 5);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    ASSERT_TRUE(firmware.replaceModels(truthSet(*sim)));
+    ASSERT_EQ(firmware.models().size(), 3u);
+
+    // The truth models' frames are the cubes' own: a body's pose is its cube's true pose.
+    std::map<std::uint32_t, std::size_t> cubeOf;
+    struct Worst {
+        double mm = 0.0;
+        double deg = 0.0;
+        std::size_t found = 0;
+    };
+    std::map<std::string, Worst> worst;
+    sim::Observation truth;
+    auto record = [&](const std::string& phase) {
+        sim->world.observe(firmware.lastFrame(), truth);
+        for (const TrackedBody& body : firmware.bodies()) {
+            if (!body.found())
+                continue;
+            if (!cubeOf.contains(body.modelId)) {
+                std::size_t nearest = 0;
+                for (std::size_t o = 1; o < truth.objectPoses.size(); ++o)
+                    if ((truth.objectPoses[o].translation_mm - body.T_rig_from_model.translation_mm)
+                            .norm() < (truth.objectPoses[nearest].translation_mm -
+                                       body.T_rig_from_model.translation_mm)
+                                          .norm())
+                        nearest = o;
+                cubeOf[body.modelId] = nearest;
+            }
+            const RigidTransform& own = truth.objectPoses[cubeOf[body.modelId]];
+            Worst& w = worst[phase];
+            w.mm =
+                std::max(w.mm, (own.translation_mm - body.T_rig_from_model.translation_mm).norm());
+            w.deg = std::max(
+                w.deg, rotationAngleBetween_rad(own.rotation, body.T_rig_from_model.rotation) *
+                           180.0 / 3.14159265358979);
+            ++w.found;
+        }
+    };
+    for (int i = 0; i < 300; ++i) {
+        firmware.step();
+        record("before");
+    }
+    ASSERT_EQ(cubeOf.size(), 3u) << "each known cube found before the session";
+    std::set<std::size_t> cubes;
+    for (const auto& [id, cube] : cubeOf)
+        cubes.insert(cube);
+    ASSERT_EQ(cubes.size(), 3u) << "three bodies on three cubes";
+
+    sim->button.press(sim->clock.now(), 150 * kMs);
+    runFrames(firmware, 60);
+    ASSERT_EQ(firmware.state(), FirmwareState::Calibrating) << firmware.lastEvent();
+    while (firmware.state() == FirmwareState::Calibrating)
+        firmware.step();
+    const auto finishStart = std::chrono::steady_clock::now();
+    while (firmware.state() == FirmwareState::Finishing) {
+        stepBesideTheWorker(firmware);
+        record("finishing");
+        ASSERT_LT(std::chrono::steady_clock::now() - finishStart, kFinishingTimeout);
+    }
+    std::cout << "[          ] " << firmware.lastEvent() << "\n";
+    EXPECT_NE(firmware.lastEvent().find(" 0 new, "), std::string::npos) << firmware.lastEvent();
+    ASSERT_EQ(firmware.models().size(), 3u) << firmware.lastEvent();
+    for (std::uint32_t id = 0; id < 3; ++id)
+        EXPECT_EQ(firmware.models()[id].model.id, id);
+    for (int i = 0; i < 500; ++i) {
+        firmware.step();
+        record("after");
+    }
+    for (const char* phase : {"before", "finishing", "after"}) {
+        const Worst& w = worst[phase];
+        std::cout << "[          ] " << phase << ": " << w.found << " poses, worst " << w.mm
+                  << " mm, " << w.deg << " deg from their own cube\n";
+        // A swap of two cubes is tens of millimetres, a frame of its own tens of degrees; a
+        // pose from a few markers is good to a few tenths.
+        EXPECT_LT(w.mm, 2.0) << phase;
+        EXPECT_LT(w.deg, 2.0) << phase;
+    }
+    EXPECT_GT(worst["finishing"].found, 0u);
+    EXPECT_GT(worst["after"].found, 1000u) << "three cubes for 500 frames";
+}
+
+// Stopping the board in the middle of a session ends it as abandoned, as a state change does.
+TEST(FirmwareOnSimBoard, AStopDuringACalibrationCountsItAsAbandoned) {
+    auto sim = makeBoard("two_cubes", 3);
+    Firmware firmware(FirmwareConfig{}, sim->board, sim->world.rig());
+    firmware.start();
+    sim->button.press(sim->clock.now(), 150 * kMs);
+    runFrames(firmware, 80);
+    ASSERT_EQ(firmware.state(), FirmwareState::Calibrating) << firmware.lastEvent();
+    firmware.stop();
+    EXPECT_EQ(firmware.counters().calibrationsAbandoned, 1u);
+    EXPECT_NE(firmware.statusReport().find("calibrations abandoned"), std::string::npos);
+}
+
 } // namespace
 } // namespace edgetrack::app
