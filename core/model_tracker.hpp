@@ -22,7 +22,9 @@ struct ModelTrackingConfig {
     /// A data distance and a model edge agree within this (mm); also the hashtable's bin width.
     /// The paper used 4 mm; the simulated rig's distances are good to 0.1 mm, and each halving of
     /// the tolerance halves the candidates of a search (a quarter of its pair checks). Models
-    /// from `calibrate` carry an S_min found at 2 mm, which stays safe at any smaller tolerance.
+    /// learnt by `calibrate` or the board carry an S_min found at this tolerance (a wrong pose
+    /// starts from distances that agree within it), which stays safe at any smaller one; a
+    /// tracker set to a larger one needs its models learnt again.
     double distanceTolerance_mm = 1.0;
     /// A data point this close to a model marker placed by a pose is that marker (mm).
     double matchRadius_mm = 2.0;

@@ -55,7 +55,8 @@ void CalibrationFinisher::start(CalibrationSession& session, std::vector<NamedMo
                 knownLayouts.push_back(copyOf(m.model));
             const std::vector<SameObject> same = findKnownInSession(
                 session.frames(), knownLayouts, sightings, learnt, tracking, shape.tolerance_mm);
-            result.merged = mergeLearntModels(known, learnt, same, maxModels, shape);
+            result.merged = mergeLearntModels(known, learnt, same, maxModels, shape,
+                                              tracking.distanceTolerance_mm);
             result.saved = store.save(result.merged.models);
         }
         result.took_s =

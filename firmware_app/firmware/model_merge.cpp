@@ -72,7 +72,7 @@ MarkerModel registeredOnto(const MarkerModel& model, const MarkerModel& known,
 MergedModels mergeLearntModels(std::span<const NamedModel> known,
                                std::span<const MarkerModel> learnt,
                                std::span<const SameObject> sameObjects, std::size_t maxModels,
-                               const SminConfig& shape) {
+                               const SminConfig& shape, double trackingTolerance_mm) {
     auto fragmentOf = [&](const MarkerModel& part, const MarkerModel& whole) {
         return 2 * part.markers_model_mm.size() < whole.markers_model_mm.size() &&
                isPartOf(part, whole, shape);
@@ -139,12 +139,15 @@ MergedModels mergeLearntModels(std::span<const NamedModel> known,
         result.learntIndex.push_back(static_cast<int>(i));
         ++result.added;
     }
-    // S_min holds against the whole set, the models kept from before included.
+    // S_min holds against the whole set, the models kept from before included, as the tracker
+    // tells distances apart.
+    SminConfig findable = shape;
+    findable.tolerance_mm = std::min(shape.tolerance_mm, trackingTolerance_mm);
     auto sminOf = [&](const std::vector<NamedModel>& set) {
         std::vector<MarkerModel> layouts;
         for (const NamedModel& m : set)
             layouts.push_back(copyOf(m.model));
-        computeSmin(layouts, shape);
+        computeSmin(layouts, findable);
         return layouts;
     };
     std::vector<MarkerModel> layouts = sminOf(result.models);

@@ -42,13 +42,18 @@ struct MergedModels {
  * take the lowest free ids, up to \a maxModels. A learnt model whose layout is part of a learnt
  * or known model with more than twice its markers is a fragment of that body (a piece the
  * calibrator did not merge back, or a glimpse of a known body): tracked, it would be found inside
- * the body, so it is dropped. S_min and sameShapeAs are recomputed over the result.
+ * the body, so it is dropped. S_min and sameShapeAs are recomputed over the result, at the
+ * tolerance the tracker pairs distances with (\a trackingTolerance_mm, ModelTrackingConfig's
+ * distanceTolerance_mm, when below \a shape's): a wrong pose starts from four data points whose
+ * distances agree with the model's within it, so layouts that differ by more cannot be taken
+ * for each other, and a larger tolerance only asks for markers that are never in view together
+ * (a 24-marker sphere: S_min 11 at 2 mm, 8 at 1 mm).
  * Allocates: it runs when a calibration ends, not per frame.
  */
 MergedModels mergeLearntModels(std::span<const NamedModel> known,
                                std::span<const MarkerModel> learnt,
                                std::span<const SameObject> sameObjects, std::size_t maxModels,
-                               const SminConfig& shape);
+                               const SminConfig& shape, double trackingTolerance_mm);
 
 /**
  * \brief Why a learnt model will seldom or never be found, or nothing when it can be: the tracker

@@ -90,7 +90,8 @@ Status runCalibrate(const CalibrateOptions& options, std::ostream& summary,
         progress << "\n";
     // As on the board when it has no models yet: the same fragments dropped, ids and S_min.
     const MergedModels merged =
-        mergeLearntModels({}, session.complete(), {}, config.maxModels, config.calibration.smin);
+        mergeLearntModels({}, session.complete(), {}, config.maxModels, config.calibration.smin,
+                          config.tracking.distanceTolerance_mm);
     const std::size_t count = merged.models.size();
     for (const NamedModel& named : merged.models)
         if (Status s =

@@ -136,6 +136,10 @@ int main(int argc, char** argv) {
     app.add_option("--tolerance", trackingConfig.distanceTolerance_mm, "distance tolerance (mm)");
     bool cold = false;
     app.add_flag("--cold", cold, "forget every body before each frame: the search alone");
+    double sminTolerance_mm = 0.0;
+    app.add_option("--smin-tolerance", sminTolerance_mm,
+                   "compute the models' S_min again at this tolerance (mm): with --cold, whether "
+                   "an S_min is sound");
     bool verbose = false;
     app.add_flag("--verbose", verbose, "print every wrong pose");
     bool allPairs = false;
@@ -195,6 +199,11 @@ int main(int argc, char** argv) {
                                        (m.markers_model_mm[i] - m.markers_model_mm[j]).norm()});
         }
         computeSmin(models, SminConfig{});
+    }
+    if (sminTolerance_mm > 0.0) {
+        SminConfig smin;
+        smin.tolerance_mm = sminTolerance_mm;
+        computeSmin(models, smin);
     }
 
     // Lay each model onto the layouts; copies of one layout list every object they fit.

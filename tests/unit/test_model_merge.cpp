@@ -48,7 +48,7 @@ const SminConfig kShape{};
 TEST(ModelMerge, NewObjectsTakeTheLowestFreeIds) {
     const std::vector<MarkerModel> l =
         learnt({layoutOf(sim::makeCube70()), layoutOf(sim::makeCube50())});
-    const MergedModels m = mergeLearntModels({}, l, {}, 16, kShape);
+    const MergedModels m = mergeLearntModels({}, l, {}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 2u);
     EXPECT_EQ(m.added, 2u);
     EXPECT_EQ(m.models[0].model.id, 0u);
@@ -62,7 +62,7 @@ TEST(ModelMerge, ARecalibratedBodyKeepsItsIdAndNameAndOthersStay) {
     k.push_back(known(layoutOf(sim::makeCube70()), 5, "big cube"));
     k.push_back(known(layoutOf(sim::makeCube50()), 2, "small cube"));
     const std::vector<MarkerModel> l = learnt({layoutOf(sim::makeCube50()), scattered(6, 1)});
-    const MergedModels m = mergeLearntModels(k, l, {}, 16, kShape);
+    const MergedModels m = mergeLearntModels(k, l, {}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 3u);
     EXPECT_EQ(m.updated, 1u);
     EXPECT_EQ(m.added, 1u);
@@ -80,7 +80,8 @@ TEST(ModelMerge, ARecalibratedBodyKeepsItsIdAndNameAndOthersStay) {
 TEST(ModelMerge, AFragmentOfALearntOrKnownBodyIsDropped) {
     const std::vector<Vec3> cube = layoutOf(sim::makeCube70());
     const std::vector<Vec3> piece = layoutOf(sim::makeCube70(), 6);
-    MergedModels m = mergeLearntModels({}, learnt({cube, piece}), {}, 16, kShape);
+    MergedModels m =
+        mergeLearntModels({}, learnt({cube, piece}), {}, 16, kShape, kShape.tolerance_mm);
     EXPECT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.fragments, 1u);
     EXPECT_EQ(m.models[0].model.markers_model_mm.size(), 30u);
@@ -89,7 +90,7 @@ TEST(ModelMerge, AFragmentOfALearntOrKnownBodyIsDropped) {
     // A glimpse of a known body must not replace the whole body's model.
     std::vector<NamedModel> k;
     k.push_back(known(cube, 3, "cube"));
-    m = mergeLearntModels(k, learnt({piece}), {}, 16, kShape);
+    m = mergeLearntModels(k, learnt({piece}), {}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.fragments, 1u);
     EXPECT_EQ(m.updated, 0u);
@@ -98,7 +99,8 @@ TEST(ModelMerge, AFragmentOfALearntOrKnownBodyIsDropped) {
 
 TEST(ModelMerge, CopiesOfOneLayoutAreKeptAndMarkedAsCopies) {
     const std::vector<Vec3> cube = layoutOf(sim::makeCube70());
-    const MergedModels m = mergeLearntModels({}, learnt({cube, cube}), {}, 16, kShape);
+    const MergedModels m =
+        mergeLearntModels({}, learnt({cube, cube}), {}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 2u);
     EXPECT_EQ(m.fragments, 0u);
     EXPECT_EQ(m.models[0].model.sameShapeAs, 1);
@@ -108,8 +110,8 @@ TEST(ModelMerge, CopiesOfOneLayoutAreKeptAndMarkedAsCopies) {
 TEST(ModelMerge, WhatDoesNotFitMaxModelsIsRefusedAndCounted) {
     std::vector<NamedModel> k;
     k.push_back(known(layoutOf(sim::makeCube70()), 0, "a"));
-    const MergedModels m =
-        mergeLearntModels(k, learnt({scattered(6, 2), scattered(7, 3)}), {}, 2, kShape);
+    const MergedModels m = mergeLearntModels(k, learnt({scattered(6, 2), scattered(7, 3)}), {}, 2,
+                                             kShape, kShape.tolerance_mm);
     EXPECT_EQ(m.models.size(), 2u);
     EXPECT_EQ(m.added, 1u);
     EXPECT_EQ(m.refused, 1u);
@@ -146,7 +148,8 @@ TEST(ModelMerge, ARelearntBodyKeepsTheFrameOfItsModelFromBefore) {
     std::normal_distribution<double> noise(0.0, 0.03);
     for (Vec3& p : noisy)
         p += Vec3(noise(random), noise(random), noise(random));
-    const MergedModels m = mergeLearntModels(k, learnt({noisy}), {}, 16, kShape);
+    const MergedModels m =
+        mergeLearntModels(k, learnt({noisy}), {}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.updated, 1u);
     EXPECT_EQ(m.models[0].model.id, 2u);
@@ -164,7 +167,8 @@ TEST(ModelMerge, TiedByPositionIdenticalObjectsKeepTheirOwnIds) {
     const std::vector<Vec3> a = moved(layout, kOtherFrame);
     const std::vector<Vec3> b = moved(layout, kOtherFrame.inverse());
     const SameObject ties[2] = {{1, 0, kOtherFrame.inverse(), 8}, {0, 1, kOtherFrame, 8}};
-    const MergedModels m = mergeLearntModels(k, learnt({a, b}), ties, 16, kShape);
+    const MergedModels m =
+        mergeLearntModels(k, learnt({a, b}), ties, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 2u);
     EXPECT_EQ(m.updated, 2u);
     EXPECT_EQ(m.added, 0u);
@@ -183,7 +187,8 @@ TEST(ModelMerge, ALayoutThatWouldTrackWorseLeavesTheModelFromBefore) {
     k.push_back(known(cube, 3, "cube"));
     const std::vector<Vec3> part = moved(layoutOf(sim::makeCube70(), 26), kOtherFrame);
     const SameObject tie{0, 0, kOtherFrame.inverse(), 20};
-    MergedModels m = mergeLearntModels(k, learnt({part}), {&tie, 1}, 16, kShape);
+    MergedModels m =
+        mergeLearntModels(k, learnt({part}), {&tie, 1}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.updated, 0u);
     EXPECT_EQ(m.added, 0u);
@@ -203,7 +208,7 @@ TEST(ModelMerge, ALayoutThatWouldTrackWorseLeavesTheModelFromBefore) {
     k.clear();
     k.push_back(known(plain, 5, "plain"));
     const SameObject same{0, 0, RigidTransform{}, 10};
-    m = mergeLearntModels(k, learnt({copied}), {&same, 1}, 16, kShape);
+    m = mergeLearntModels(k, learnt({copied}), {&same, 1}, 16, kShape, kShape.tolerance_mm);
     ASSERT_EQ(m.models.size(), 1u);
     EXPECT_EQ(m.kept, (std::vector<std::uint32_t>{5})) << "S_min " << m.models[0].model.sMin;
     EXPECT_TRUE(onLayout(m.models[0].model, plain, 1e-9));
@@ -221,6 +226,16 @@ TEST(ModelMerge, AModelThatNeedsMoreMarkersThanItsSessionShowedIsSaidSeldomFinda
     EXPECT_NE(why->find("less regular"), std::string::npos);
     EXPECT_FALSE(seldomFindable(sphere, 11).has_value());
     EXPECT_FALSE(seldomFindable(sphere, 0).has_value()) << "nothing known of its session";
+}
+
+TEST(ModelMerge, SminIsWhatTheTrackerNeedsAtTheToleranceItPairsDistancesWith) {
+    // The jittered sphere's layout nearly maps onto itself in many ways: within 2 mm, ten
+    // markers at once; within the tracker's 1 mm, seven.
+    const std::vector<Vec3> sphere = layoutOf(sim::makeSphere70());
+    EXPECT_EQ(mergeLearntModels({}, learnt({sphere}), {}, 16, kShape, 2.0).models[0].model.sMin,
+              11u);
+    EXPECT_EQ(mergeLearntModels({}, learnt({sphere}), {}, 16, kShape, 1.0).models[0].model.sMin,
+              8u);
 }
 
 TEST(KnownInSession, TiesEachLearntModelToTheBodyThatWasWhereItIs) {
