@@ -5,17 +5,6 @@
 
 namespace edgetrack::app {
 
-namespace {
-
-/// Frames a session can last: its longest duration at the camera rate, and a margin for jitter.
-std::size_t sessionFrames(const FirmwareConfig& config) {
-    return static_cast<std::size_t>(
-               std::ceil(config.session.maxDuration_s * config.cameras.frameRate_hz * 1.05)) +
-           16;
-}
-
-} // namespace
-
 const char* endReason(SessionStep step) {
     switch (step) {
     case SessionStep::BufferFull:

@@ -4,6 +4,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <optional>
 #include <sstream>
@@ -361,7 +362,45 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
     }
     if (error)
         return *error;
+    // Every capacity is within its range, but together they may ask for more memory than a board
+    // has: refused here, with what takes it, rather than a failed allocation at start-up.
+    if (const MemoryNeed need = memoryNeed(config); need.total() > kMaxMemoryNeed_bytes) {
+        constexpr double kMb = 1024.0 * 1024.0;
+        char why[320];
+        std::snprintf(
+            why, sizeof why,
+            "the settings need %.0f MB of memory (camera images %.0f, blob detection "
+            "%.0f, calibration session buffer %.0f, flash %.0f), more than the %.0f MB "
+            "a board keeps for edgetrack: lower [cameras] width_px, height_px or "
+            "buffers, [calibration] max_duration_s or buffer_points_per_frame, or "
+            "[flash] size_bytes",
+            static_cast<double>(need.total()) / kMb, static_cast<double>(need.images) / kMb,
+            static_cast<double>(need.detection) / kMb, static_cast<double>(need.session) / kMb,
+            static_cast<double>(need.flash) / kMb, static_cast<double>(kMaxMemoryNeed_bytes) / kMb);
+        return Error{std::string(name) + ": " + why};
+    }
     return config;
+}
+
+std::size_t sessionFrames(const FirmwareConfig& config) {
+    return static_cast<std::size_t>(
+               std::ceil(config.session.maxDuration_s * config.cameras.frameRate_hz * 1.05)) +
+           16;
+}
+
+MemoryNeed memoryNeed(const FirmwareConfig& config) {
+    MemoryNeed need;
+    const auto pixels = static_cast<std::uint64_t>(config.cameras.width_px) *
+                        static_cast<std::uint64_t>(config.cameras.height_px);
+    need.images = 2 * 3 * static_cast<std::uint64_t>(config.cameras.buffers) * pixels;
+    // Labels (32-bit) and a byte mask per pixel, per camera.
+    need.detection = 2 * 5 * pixels;
+    // Each point 24 bytes; each frame its time and where its points start.
+    need.session = static_cast<std::uint64_t>(sessionFrames(config)) *
+                   (24 * static_cast<std::uint64_t>(config.session.bufferPointsPerFrame) + 16);
+    need.flash = static_cast<std::uint64_t>(config.flash.size_bytes) +
+                 static_cast<std::uint64_t>(config.flash.rigSize_bytes);
+    return need;
 }
 
 Result<FirmwareConfig> loadFirmwareConfig(const std::filesystem::path& path) {

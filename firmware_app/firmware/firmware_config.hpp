@@ -192,6 +192,31 @@ Result<FirmwareConfig> parseFirmwareConfig(std::string_view text, std::string_vi
 /// \brief Read and parse \a path.
 Result<FirmwareConfig> loadFirmwareConfig(const std::filesystem::path& path);
 
+/// \brief Frames a calibration session can hold: max_duration_s at the camera rate, and a
+/// margin for jitter.
+std::size_t sessionFrames(const FirmwareConfig& config);
+
+/// \brief What the configuration's capacities allocate at start-up, in bytes, by its largest
+/// parts (the rest is a few megabytes).
+struct MemoryNeed {
+    /// The cameras' frame buffers: two cameras, [cameras] buffers each, 8-bit (RGB as libcamera
+    /// may deliver it is three times that: counted so).
+    std::uint64_t images = 0;
+    /// Blob detection's per-pixel working images, both cameras.
+    std::uint64_t detection = 0;
+    /// The calibration session buffer: sessionFrames() frames of buffer_points_per_frame points.
+    std::uint64_t session = 0;
+    /// The model and rig partitions (the simulated board holds them in memory).
+    std::uint64_t flash = 0;
+
+    std::uint64_t total() const { return images + detection + session + flash; }
+};
+MemoryNeed memoryNeed(const FirmwareConfig& config);
+
+/// A configuration that would allocate more than this is refused: the smallest boards of the
+/// Raspberry Pi class have 1 GiB, shared with the system.
+inline constexpr std::uint64_t kMaxMemoryNeed_bytes = 512ull << 20;
+
 /**
  * \brief The completion stage's settings for a session on \a rig: [completion], with the
  * capacities and S_min of [calibration], seen from between the cameras (none: the rig origin).

@@ -162,5 +162,24 @@ TEST(FirmwareConfig, ADirectoryGivenAsTheFileIsAnErrorNotTheDefaults) {
     EXPECT_NE(c.error().message.find("is a directory"), std::string::npos) << c.error().message;
 }
 
+TEST(FirmwareConfig, CapacitiesThatTogetherExceedABoardsMemoryAreRefusedWithWhatTakesIt) {
+    // Each within its range, together 1.4 TB of session buffer: the allocation at start-up
+    // aborted the program (std::bad_alloc).
+    const Result<FirmwareConfig> huge = parseFirmwareConfig(
+        "[cameras]\nframe_rate_hz = 1000.0\nexposure_us = 100.0\n"
+        "[calibration]\nmax_duration_s = 3600.0\nbuffer_points_per_frame = 4096\n",
+        "board.toml");
+    ASSERT_FALSE(huge);
+    EXPECT_EQ(huge.error().message.rfind("board.toml: the settings need ", 0), 0u)
+        << huge.error().message;
+    EXPECT_NE(huge.error().message.find("calibration session buffer"), std::string::npos);
+    EXPECT_EQ(huge.error().message.find('\n'), std::string::npos);
+    // Images: 8192 x 8192 in 32 buffers a camera.
+    EXPECT_FALSE(parseFirmwareConfig("[cameras]\nwidth_px = 8192\nheight_px = 8192\nbuffers = 32\n",
+                                     "board.toml"));
+    // The defaults take a tenth of the bound.
+    EXPECT_LT(memoryNeed(FirmwareConfig{}).total(), kMaxMemoryNeed_bytes / 8);
+}
+
 } // namespace
 } // namespace edgetrack::app
