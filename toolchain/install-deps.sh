@@ -5,7 +5,8 @@
 #   toolchain/install-deps.sh aarch64       also the cross compiler, qemu-user and arm64 libraries
 #   toolchain/install-deps.sh aarch64 hil   also the hardware-test VM (tests/hil): qemu-system,
 #                                           Debian's kernel, its headers and sources, can-utils,
-#                                           gpiod and libcamera's tools (cam) and IPA modules
+#                                           gpiod and libcamera's tools (cam) and IPA modules; and
+#                                           mmdebstrap, for the package test in a fresh root
 set -euo pipefail
 
 if [ "$(id -u)" -ne 0 ]; then
@@ -56,7 +57,8 @@ if want hil; then
     # The VM boots Debian's own kernel; gpio-sim and vimc are built from its sources against its
     # headers (tests/hil/build-modules.sh), so image, headers and sources must be one version.
     apt_install qemu-system-x86 linux-image-amd64 linux-headers-amd64 linux-source-6.1 \
-        busybox-static cpio kmod udev iproute2 can-utils xz-utils gpiod libcamera-ipa libcamera-tools
+        busybox-static cpio kmod udev iproute2 can-utils xz-utils gpiod libcamera-ipa libcamera-tools \
+        mmdebstrap
 fi
 
 if want aarch64; then
