@@ -43,7 +43,11 @@ mmdebstrap --variant=apt --quiet bookworm "$root" "$sources"
 cp "$deb" "$root/tmp/edgetrack.deb"
 
 echo "== apt-get install ./edgetrack.deb in it"
-chroot "$root" apt-get install -y -q --no-install-recommends /tmp/edgetrack.deb
+# mmdebstrap leaves no package lists behind: a user's apt-get update comes first.
+chroot "$root" apt-get update -q >"$work/update.log" 2>&1 || { cat "$work/update.log"; exit 1; }
+chroot "$root" apt-get install -y -q --no-install-recommends /tmp/edgetrack.deb >"$work/install.log" 2>&1 ||
+    { cat "$work/install.log"; exit 1; }
+tail -3 "$work/install.log"
 mount -t proc proc "$root/proc"
 
 echo "== edgetrack --help"
