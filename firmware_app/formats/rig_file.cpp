@@ -47,11 +47,15 @@ Result<CameraModel> readCamera(std::string_view name, const toml::table& table, 
                  "not a proper rotation matrix (row-major, orthonormal, det +1)");
     if (error)
         return *error;
-    if (const std::optional<double> fold = model.foldInsideImage_px())
+    if (const std::optional<double> fold = model.foldInsideImage_px()) {
+        // As text, not through int: a focal length of 1e67 px puts the fold past any int.
+        char radius[32];
+        std::snprintf(radius, sizeof radius, "%.0f", *fold);
         keys.require(false, "distortion",
-                     "folds the image back " + std::to_string(static_cast<int>(*fold)) +
+                     std::string("folds the image back ") + radius +
                          " px from the principal point, inside the image (the radius stops "
                          "growing there): no lens does that, check k1, k2, k3");
+    }
     if (error)
         return *error;
     return model;
