@@ -2,7 +2,8 @@
 //
 // The input is split at NUL bytes: the configuration, then up to three model files
 // (body_0.json ...). Each is written into a directory of this process and the firmware runs three
-// frames on the simulated board with them, as `run --config FILE --models DIR --frames 3` would.
+// frames of the simulated board's wand scene with them, as `run --scene wand --config FILE
+// --models DIR --frames 3` would.
 // The run must end with exit 0 or 1 (an error it names), never crash or hang.
 #include <cstdint>
 #include <filesystem>
@@ -64,6 +65,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     options.config = work / "edgetrack.toml";
     options.models = models;
     options.board = "sim";
+    // The wand's three markers: rendering the images is most of a run's time, and what is fuzzed
+    // is the configuration and the models, not the scene.
+    options.scene = "wand";
     options.frames = 3;
     // Loopback only, whatever the configuration names: a fuzzer sends nowhere else.
     options.udp = "127.0.0.1:9";
