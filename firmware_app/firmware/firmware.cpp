@@ -152,10 +152,7 @@ void Firmware::stop() {
     cameras_.started = false;
 }
 
-void Firmware::setModels(std::vector<NamedModel> models) {
-    // A body whose id stays keeps its frame (a recalibration registers the new layout onto the
-    // old one): the new tracker follows it on from where the old one had it, so two identical
-    // objects keep their ids.
+void Firmware::setModels(std::vector<NamedModel> models, SameFrames same) {
     std::optional<ModelTracker> previous = std::move(tracker_);
     const std::vector<NamedModel> before = std::move(models_);
     models_ = std::move(models);
@@ -164,7 +161,7 @@ void Firmware::setModels(std::vector<NamedModel> models) {
     for (const NamedModel& m : models_)
         layouts.push_back(copyOf(m.model));
     tracker_.emplace(layouts, config_.tracking);
-    if (previous)
+    if (previous && same == SameFrames::ForKeptIds)
         for (std::size_t i = 0; i < models_.size(); ++i)
             for (std::size_t j = 0; j < before.size(); ++j)
                 if (before[j].model.id == models_[i].model.id)
@@ -395,7 +392,7 @@ void Firmware::takeFinishedCalibration(FinishedCalibration finished) {
         text += ", NOT saved to flash (" + finished.saved.error().message + ")";
     }
     reportModelsSaved(finished.saved, finished.merged.models.size());
-    setModels(std::move(finished.merged.models));
+    setModels(std::move(finished.merged.models), SameFrames::ForKeptIds);
     note(std::move(text));
 }
 

@@ -223,7 +223,13 @@ private:
     void deleteModels();
     /// What flashReport() says of the models after a save of \a count models that gave \a saved.
     void reportModelsSaved(const Status& saved, std::size_t count);
-    void setModels(std::vector<NamedModel> models);
+    /// How a new model set relates to the one in use: a set merged by a calibration keeps each
+    /// remaining body's frame (a relearnt layout is registered onto the old one), a set from
+    /// outside (files, deletion) may put another layout under an id.
+    enum class SameFrames : bool { No, ForKeptIds };
+    /// \brief Track \a models from the next frame; with SameFrames::ForKeptIds each body whose
+    /// id stays is followed on from where it was, so identical objects keep their ids.
+    void setModels(std::vector<NamedModel> models, SameFrames same = SameFrames::No);
 
     struct Queued;
     void capture();
