@@ -311,9 +311,13 @@ TEST(StereoMatcher, ASphereTellsOneRadiusToBothCamerasOfAnyRig) {
         StereoMatcher matcher(world.rig(), config, 2);
         sim::Random random(seed);
         for (int k = 0; k < 20; ++k) {
-            // A point in front of the rig, anywhere both cameras may see it.
-            const Vec3 offset(random.uniform(-250.0, 250.0), random.uniform(-200.0, 200.0),
-                              random.uniform(-150.0, 200.0));
+            // A point in front of the rig, anywhere both cameras may see it. Drawn one statement
+            // at a time: the order in which a constructor's arguments are evaluated differs
+            // between compilers' targets (x86-64 and aarch64 drew different points).
+            const double x = random.uniform(-250.0, 250.0);
+            const double y = random.uniform(-200.0, 200.0);
+            const double z = random.uniform(-150.0, 200.0);
+            const Vec3 offset(x, y, z);
             sim::Observation observation;
             const sim::World placed(
                 [&] {
@@ -338,8 +342,12 @@ TEST(StereoMatcher, ASphereTellsOneRadiusToBothCamerasOfAnyRig) {
             }
             matcher.prepare(blobs[0], blobs[1]);
             const double weight = matcher.proximity(0, 0);
-            // proximity is the size weight times eq. 1's term of an exact pair (under 1e-3 px off).
-            EXPECT_GT(weight, 0.99) << "rig " << seed << " at " << offset.transpose();
+            // proximity is the size weight times eq. 1's term of an exact pair (under 1e-3 px off),
+            // so it tells the log ratio of the two radii. The small-sphere model holds to 0.2%
+            // at worst over these places (rig 18, a 9.4 mm ball), where radius times range is off
+            // by tens of percent.
+            const double sizeLogRatio = config.sizeSigma * std::sqrt(-2.0 * std::log(weight));
+            EXPECT_LT(sizeLogRatio, 0.005) << "rig " << seed << " at " << offset.transpose();
             const double range0 =
                 (view.position_rig_mm - world.rig().camera(0).centre_rig_mm()).norm();
             const double range1 =
