@@ -110,8 +110,9 @@ void blobsFromObservation(const Observation& observation, int camera, const Leve
                 area += a;
             }
         SimBlob blob;
-        blob.centre_px = weighted / area + Vec2(random.normal(noise.blobCentreSigma_px),
-                                                random.normal(noise.blobCentreSigma_px));
+        const double noiseY = random.normal(noise.blobCentreSigma_px);
+        const double noiseX = random.normal(noise.blobCentreSigma_px);
+        blob.centre_px = weighted / area + Vec2(noiseX, noiseY);
         blob.area_px = area;
         out.push_back(blob);
     }
@@ -156,9 +157,10 @@ void pointsFromObservation(const Observation& observation, const LevelNoise& noi
         const Vec3& p = s < markerCount
                             ? observation.markers[s].position_rig_mm
                             : observation.spuriousPoints[s - markerCount].position_rig_mm;
-        out.push_back(p + Vec3(random.normal(noise.pointSigma_mm),
-                               random.normal(noise.pointSigma_mm),
-                               random.normal(noise.pointSigma_mm)));
+        const double noiseZ = random.normal(noise.pointSigma_mm);
+        const double noiseY = random.normal(noise.pointSigma_mm);
+        const double noiseX = random.normal(noise.pointSigma_mm);
+        out.push_back(p + Vec3(noiseX, noiseY, noiseZ));
     }
     // INTERFACES §1: points come in any order; shuffling keeps consumers honest.
     for (std::size_t i = out.size(); i > 1; --i)

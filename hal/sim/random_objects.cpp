@@ -55,8 +55,9 @@ std::vector<SimMarker> place(Random& random, int count, const Sampler& sample, d
 }
 
 MarkerObject ellipsoid(Random& random, int count) {
-    const Vec3 axes = random.uniform(22.0, 45.0) *
-                      Vec3(1.0, random.uniform(0.55, 1.0), random.uniform(0.45, 1.0));
+    const double axisZ = random.uniform(0.45, 1.0);
+    const double axisY = random.uniform(0.55, 1.0);
+    const Vec3 axes = random.uniform(22.0, 45.0) * Vec3(1.0, axisY, axisZ);
     double scale = std::max(1.0, std::sqrt(count / 14.0));
     const Sampler sample = [&axes](Random& r, double s) {
         const Vec3 u = randomDirection(r);
@@ -72,17 +73,18 @@ MarkerObject ellipsoid(Random& random, int count) {
 }
 
 MarkerObject plate(Random& random, int count) {
-    const Vec3 half(random.uniform(30.0, 70.0), random.uniform(20.0, 45.0),
-                    random.uniform(2.0, 5.0));
+    const double halfZ = random.uniform(2.0, 5.0);
+    const double halfY = random.uniform(20.0, 45.0);
+    const Vec3 half(random.uniform(30.0, 70.0), halfY, halfZ);
     double scale = std::max(1.0, std::sqrt(count / 16.0));
     const Sampler sample = [&half](Random& r, double s) {
         const Vec3 h(s * half.x(), s * half.y(), half.z());
         if (r.chance(0.8)) {
             // On the top, some on short stand-offs, so the layout is not always one plane.
             const double standOff = r.chance(0.3) ? r.uniform(5.0, 15.0) : 0.0;
-            return SimMarker{Vec3(r.uniform(-h.x() + 4.0, h.x() - 4.0),
-                                  r.uniform(-h.y() + 4.0, h.y() - 4.0), h.z() + standOff),
-                             Vec3::UnitZ()};
+            const double y = r.uniform(-h.y() + 4.0, h.y() - 4.0);
+            const double x = r.uniform(-h.x() + 4.0, h.x() - 4.0);
+            return SimMarker{Vec3(x, y, h.z() + standOff), Vec3::UnitZ()};
         }
         // On the rim, facing out.
         const bool alongX = r.chance(0.5);
@@ -118,12 +120,13 @@ MarkerObject ring(Random& random, int count) {
 }
 
 MarkerObject posts(Random& random, int count) {
-    const Vec3 base(random.uniform(35.0, 60.0), random.uniform(30.0, 55.0), 4.0);
+    const double baseY = random.uniform(30.0, 55.0);
+    const Vec3 base(random.uniform(35.0, 60.0), baseY, 4.0);
     double scale = std::max(1.0, std::sqrt(count / 12.0));
     const Sampler sample = [&base](Random& r, double s) {
         const double height = r.uniform(12.0, 70.0);
-        const Vec3 foot(r.uniform(-s * base.x(), s * base.x()),
-                        r.uniform(-s * base.y(), s * base.y()), base.z());
+        const double footY = r.uniform(-s * base.y(), s * base.y());
+        const Vec3 foot(r.uniform(-s * base.x(), s * base.x()), footY, base.z());
         // A disc on the post's top, tilted a little from straight up.
         const Vec3 tilt = 0.5 * randomDirection(r);
         return SimMarker{foot + Vec3(0.0, 0.0, height), (Vec3::UnitZ() + tilt).normalized()};
@@ -147,8 +150,9 @@ MarkerObject star(Random& random, int count) {
 }
 
 MarkerObject box(Random& random, int count) {
-    const Vec3 half(random.uniform(20.0, 50.0), random.uniform(15.0, 40.0),
-                    random.uniform(10.0, 30.0));
+    const double halfZ = random.uniform(10.0, 30.0);
+    const double halfY = random.uniform(15.0, 40.0);
+    const Vec3 half(random.uniform(20.0, 50.0), halfY, halfZ);
     double scale = std::max(1.0, std::sqrt(count / 18.0));
     const Sampler sample = [&half](Random& r, double s) {
         const Vec3 h = s * half;
@@ -172,9 +176,10 @@ MarkerObject box(Random& random, int count) {
 
 MarkerObject car(Random& random, int count) {
     const double length = random.uniform(45.0, 80.0);
-    const Vec3 body(length, length * random.uniform(0.38, 0.5), random.uniform(12.0, 22.0));
-    const Vec3 cabin(body.x() * random.uniform(0.35, 0.55), body.y() * 0.85,
-                     random.uniform(8.0, 14.0));
+    const double bodyZ = random.uniform(12.0, 22.0);
+    const Vec3 body(length, length * random.uniform(0.38, 0.5), bodyZ);
+    const double cabinZ = random.uniform(8.0, 14.0);
+    const Vec3 cabin(body.x() * random.uniform(0.35, 0.55), body.y() * 0.85, cabinZ);
     double scale = std::max(1.0, std::sqrt(count / 24.0));
     const Sampler sample = [&body, &cabin](Random& r, double s) {
         const Vec3 b = s * body;
@@ -182,15 +187,16 @@ MarkerObject car(Random& random, int count) {
         const Vec3 cabinCentre(-0.1 * b.x(), 0.0, b.z() + c.z());
         // Hood and trunk, sides, roof, cabin sides: the surfaces someone would stick markers on.
         const double pick = r.uniform();
-        if (pick < 0.3)
-            return SimMarker{Vec3(r.uniform(-b.x() + 4.0, b.x() - 4.0),
-                                  r.uniform(-b.y() + 4.0, b.y() - 4.0), b.z()),
-                             Vec3::UnitZ()};
+        if (pick < 0.3) {
+            const double y = r.uniform(-b.y() + 4.0, b.y() - 4.0);
+            const double x = r.uniform(-b.x() + 4.0, b.x() - 4.0);
+            return SimMarker{Vec3(x, y, b.z()), Vec3::UnitZ()};
+        }
         if (pick < 0.65) {
             const double sign = r.chance(0.5) ? 1.0 : -1.0;
-            return SimMarker{Vec3(r.uniform(-b.x() + 4.0, b.x() - 4.0), sign * b.y(),
-                                  r.uniform(-b.z() + 3.0, b.z() - 3.0)),
-                             sign * Vec3::UnitY()};
+            const double z = r.uniform(-b.z() + 3.0, b.z() - 3.0);
+            const double x = r.uniform(-b.x() + 4.0, b.x() - 4.0);
+            return SimMarker{Vec3(x, sign * b.y(), z), sign * Vec3::UnitY()};
         }
         if (pick < 0.75) {
             const double sign = r.chance(0.5) ? 1.0 : -1.0;

@@ -164,7 +164,9 @@ Motion::Motion(const MotionSpec& spec, std::uint64_t seed)
     : spec_(spec) {
     Random random(seed);
     initial_ = randomRotation(random);
-    spinAxis_ = Vec3(random.uniform(-0.3, 0.3), 1.0, random.uniform(-0.3, 0.3)).normalized();
+    const double spinZ = random.uniform(-0.3, 0.3);
+    const double spinX = random.uniform(-0.3, 0.3);
+    spinAxis_ = Vec3(spinX, 1.0, spinZ).normalized();
     tumbleAxis_ = spinAxis_.cross(Vec3(random.uniform(-0.5, 0.5), 0.0, 1.0)).normalized();
     // Three incommensurate waves per axis make a path that does not visibly repeat.
     const std::array<double, 3> shares{0.65, 0.25, 0.10};
@@ -347,7 +349,10 @@ MarkerObject makeClusters() {
         const int count = 2 + c % 2;
         object.markers.push_back({centre, Vec3::Zero()});
         for (int k = 1; k < count; ++k) {
-            Vec3 direction(random.normal(), random.normal(), random.normal());
+            const double z = random.normal();
+            const double y = random.normal();
+            const double x = random.normal();
+            Vec3 direction(x, y, z);
             direction.normalize();
             const double distance = object.markerDiameter_mm * random.uniform(1.3, 2.0);
             object.markers.push_back({centre + distance * direction, Vec3::Zero()});

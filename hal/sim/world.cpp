@@ -90,10 +90,12 @@ World::World(Scene scene, std::uint64_t seed)
     // Scene coordinates: about the middle of the project's rig, which randomRig()s also face.
     const double midline =
         scene_.rig.convergence_deg >= 0.0 ? kSceneCentre_mm.x() : 0.5 * scene_.rig.baseline_mm;
-    for (int i = 0; i < scene_.spurious.points3d; ++i)
-        spuriousPoints_rig_mm_.push_back(T_rig_from_scene_.apply(
-            Vec3(random.uniform(midline - 220.0, midline + 220.0), random.uniform(-160.0, 160.0),
-                 random.uniform(420.0, 760.0))));
+    for (int i = 0; i < scene_.spurious.points3d; ++i) {
+        const double z = random.uniform(420.0, 760.0);
+        const double y = random.uniform(-160.0, 160.0);
+        const double x = random.uniform(midline - 220.0, midline + 220.0);
+        spuriousPoints_rig_mm_.push_back(T_rig_from_scene_.apply(Vec3(x, y, z)));
+    }
     occluderScratch_.reserve(scene_.occluders.size());
 }
 
