@@ -59,39 +59,43 @@ bool offOneLine(std::span<const Vec3> points, double offLine_mm) {
 std::optional<SameObject> coincide(const MarkerModel& known, const RigidTransform& T_rig_from_known,
                                    const MarkerModel& learnt,
                                    const RigidTransform& T_rig_from_learnt, double tolerance_mm) {
-    std::vector<Vec3> learntPoints, knownPoints;
-    std::vector<bool> taken(known.markers_model_mm.size(), false);
-    const double tolerance2 = tolerance_mm * tolerance_mm;
-    for (const Vec3& n : learnt.markers_model_mm) {
-        const Vec3 at = T_rig_from_learnt.apply(n);
-        std::size_t best = taken.size();
-        double bestDistance2 = tolerance2;
-        for (std::size_t m = 0; m < known.markers_model_mm.size(); ++m) {
-            const double d2 =
-                (T_rig_from_known.apply(known.markers_model_mm[m]) - at).squaredNorm();
-            if (!taken[m] && d2 <= bestDistance2) {
-                best = m;
-                bestDistance2 = d2;
-            }
-        }
-        if (best == taken.size())
-            continue;
-        taken[best] = true;
-        learntPoints.push_back(n);
-        knownPoints.push_back(known.markers_model_mm[best]);
-    }
-    if (learntPoints.size() < 3 || !offOneLine(knownPoints, 2.0 * tolerance_mm))
+    const MarkerPairs pairs = coincidingMarkers(
+        learnt, known, T_rig_from_known.inverse() * T_rig_from_learnt, tolerance_mm);
+    if (pairs.learnt_mm.size() < 3 || !offOneLine(pairs.known_mm, 2.0 * tolerance_mm))
         return std::nullopt;
-    const std::optional<RigidFit> fit = fitRigid(learntPoints, knownPoints);
+    const std::optional<RigidFit> fit = fitRigid(pairs.learnt_mm, pairs.known_mm);
     if (!fit || fit->rms_mm > tolerance_mm)
         return std::nullopt;
     SameObject same;
     same.T_known_from_learnt = fit->transform;
-    same.sharedMarkers = learntPoints.size();
+    same.sharedMarkers = pairs.learnt_mm.size();
     return same;
 }
 
 } // namespace
+
+MarkerPairs coincidingMarkers(const MarkerModel& learnt, const MarkerModel& known,
+                              const RigidTransform& T_known_from_learnt, double tolerance_mm) {
+    MarkerPairs pairs;
+    std::vector<bool> taken(known.markers_model_mm.size(), false);
+    for (const Vec3& n : learnt.markers_model_mm) {
+        const Vec3 at = T_known_from_learnt.apply(n);
+        std::size_t best = taken.size();
+        double bestDistance2 = tolerance_mm * tolerance_mm;
+        for (std::size_t m = 0; m < known.markers_model_mm.size(); ++m)
+            if (const double d2 = (known.markers_model_mm[m] - at).squaredNorm();
+                !taken[m] && d2 <= bestDistance2) {
+                best = m;
+                bestDistance2 = d2;
+            }
+        if (best == taken.size())
+            continue;
+        taken[best] = true;
+        pairs.learnt_mm.push_back(n);
+        pairs.known_mm.push_back(known.markers_model_mm[best]);
+    }
+    return pairs;
+}
 
 std::vector<SameObject>
 findKnownInSession(const SessionBuffer& frames, std::span<const MarkerModel> known,

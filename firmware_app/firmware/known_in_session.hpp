@@ -34,6 +34,21 @@ struct SameObject {
     std::size_t sharedMarkers = 0;
 };
 
+/// \brief Markers of a learnt layout paired with markers of a known one, each in its own frame
+/// (mm).
+struct MarkerPairs {
+    std::vector<Vec3> learnt_mm;
+    std::vector<Vec3> known_mm;
+};
+
+/**
+ * \brief The markers of \a learnt that \a T_known_from_learnt puts within \a tolerance_mm of a
+ * marker of \a known, each paired with the nearest known marker not taken by an earlier one: what
+ * a registration of the one layout onto the other is fitted over.
+ */
+MarkerPairs coincidingMarkers(const MarkerModel& learnt, const MarkerModel& known,
+                              const RigidTransform& T_known_from_learnt, double tolerance_mm);
+
 /**
  * \brief Tie learnt models to the known bodies they are, by position, not by shape.
  *

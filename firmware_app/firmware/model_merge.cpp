@@ -41,24 +41,11 @@ namespace {
 MarkerModel registeredOnto(const MarkerModel& model, const MarkerModel& known,
                            RigidTransform T_known_from_learnt, double tolerance_mm) {
     for (int round = 0; round < 2; ++round) {
-        std::vector<Vec3> from, to;
-        for (const Vec3& m : model.markers_model_mm) {
-            const Vec3 at = T_known_from_learnt.apply(m);
-            const Vec3* nearest = nullptr;
-            double nearest2 = tolerance_mm * tolerance_mm;
-            for (const Vec3& k : known.markers_model_mm)
-                if (const double d2 = (k - at).squaredNorm(); d2 <= nearest2) {
-                    nearest = &k;
-                    nearest2 = d2;
-                }
-            if (nearest != nullptr) {
-                from.push_back(m);
-                to.push_back(*nearest);
-            }
-        }
-        if (from.size() < 3)
+        const MarkerPairs pairs =
+            coincidingMarkers(model, known, T_known_from_learnt, tolerance_mm);
+        if (pairs.learnt_mm.size() < 3)
             break;
-        if (const std::optional<RigidFit> fit = fitRigid(from, to))
+        if (const std::optional<RigidFit> fit = fitRigid(pairs.learnt_mm, pairs.known_mm))
             T_known_from_learnt = fit->transform;
     }
     MarkerModel moved = copyOf(model);
