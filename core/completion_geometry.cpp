@@ -452,22 +452,7 @@ bool offOneLine(const MarkerBits& shared, std::span<const Vec3> layout, double m
     for (std::size_t k = 0; k < layout.size(); ++k)
         if (holds(shared, k))
             points.push_back(layout[k]);
-    if (points.size() < 3)
-        return false;
-    std::size_t a = 0, b = 1;
-    double widest = -1.0;
-    for (std::size_t i = 0; i < points.size(); ++i)
-        for (std::size_t j = i + 1; j < points.size(); ++j)
-            if (const double d = (points[i] - points[j]).squaredNorm(); d > widest) {
-                widest = d;
-                a = i;
-                b = j;
-            }
-    const Vec3 direction = (points[b] - points[a]).normalized();
-    return std::any_of(points.begin(), points.end(), [&](const Vec3& p) {
-        const Vec3 off = p - points[a];
-        return (off - off.dot(direction) * direction).norm() >= minSpread_mm;
-    });
+    return edgetrack::offOneLine(points, minSpread_mm);
 }
 
 } // namespace

@@ -9,6 +9,27 @@
 
 namespace edgetrack {
 
+bool offOneLine(std::span<const Vec3> points, double minSpread_mm) {
+    if (points.size() < 3)
+        return false;
+    std::size_t a = 0, b = 1;
+    double widest = -1.0;
+    for (std::size_t i = 0; i < points.size(); ++i)
+        for (std::size_t j = i + 1; j < points.size(); ++j)
+            if (const double d = (points[i] - points[j]).squaredNorm(); d > widest) {
+                widest = d;
+                a = i;
+                b = j;
+            }
+    const Vec3 direction = (points[b] - points[a]).normalized();
+    for (const Vec3& p : points) {
+        const Vec3 off = p - points[a];
+        if ((off - off.dot(direction) * direction).norm() >= minSpread_mm)
+            return true;
+    }
+    return false;
+}
+
 std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec3> to) {
     const std::size_t n = from.size();
     if (n != to.size() || n < 3)

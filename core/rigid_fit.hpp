@@ -28,6 +28,13 @@ struct RigidFit {
 std::optional<RigidFit> fitRigid(std::span<const Vec3> from, std::span<const Vec3> to);
 
 /**
+ * \brief Whether \a points (mm) stand at least \a minSpread_mm off the line through the two
+ * farthest apart of them: points on one line leave the turn about it undetermined, and a fit to
+ * them places everything off that line at random. False for fewer than three points.
+ */
+bool offOneLine(std::span<const Vec3> points, double minSpread_mm);
+
+/**
  * \brief fitRigid's transform for two triangles of (nearly) equal sides, corners paired by
  * index, in closed form: three points lie in a plane, so the least-squares rotation turns the one
  * triangle's normal onto the other's and then turns in that plane by the two-dimensional

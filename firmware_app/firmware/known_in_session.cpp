@@ -31,29 +31,6 @@ std::optional<std::size_t> frameAt(const SessionBuffer& frames, double time_s) {
     return std::nullopt;
 }
 
-/// Whether points stand off the line through the two farthest apart by more than \a offLine_mm:
-/// on one line they leave the turn about it free, and a fit would place the rest at random.
-bool offOneLine(std::span<const Vec3> points, double offLine_mm) {
-    std::size_t a = 0, b = 0;
-    double farthest = 0.0;
-    for (std::size_t i = 0; i < points.size(); ++i)
-        for (std::size_t j = i + 1; j < points.size(); ++j)
-            if (const double d = (points[i] - points[j]).squaredNorm(); d > farthest) {
-                farthest = d;
-                a = i;
-                b = j;
-            }
-    if (farthest <= 0.0)
-        return false;
-    const Vec3 axis = (points[b] - points[a]).normalized();
-    for (const Vec3& p : points) {
-        const Vec3 off = (p - points[a]) - axis * axis.dot(p - points[a]);
-        if (off.norm() > offLine_mm)
-            return true;
-    }
-    return false;
-}
-
 /// The learnt model \a learnt placed at \a T_rig_from_learnt against the known body \a known at
 /// \a T_rig_from_known: the markers that coincide, and the registration fitted over them.
 std::optional<SameObject> coincide(const MarkerModel& known, const RigidTransform& T_rig_from_known,
